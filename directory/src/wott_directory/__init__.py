@@ -1,0 +1,1 @@
+"""A W3C WoT Thing Description Directory."""

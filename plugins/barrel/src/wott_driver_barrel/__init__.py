@@ -1,0 +1,1 @@
+"""wott-hub driver plugin."""

@@ -1,0 +1,1 @@
+"""Simulation support shared by every device family's simulator: scripted scenes."""

@@ -1,0 +1,56 @@
+"""The unit of data every driver produces: one snapshot of a skin's displacement."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["FrameError", "TactileFrame"]
+
+
+class FrameError(ValueError):
+    """A frame that must not enter the pipeline (wrong shape, NaN/Inf, bad time)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TactileFrame:
+    """Displacement ``D`` (N x 3, mm) of every mesh node at time ``t_ns``.
+
+    Validation happens here, at the boundary, so nothing downstream ever sees
+    NaN/Inf: a driver whose model diverges gets a clear error instead of a
+    client receiving garbage.
+    """
+
+    t_ns: int
+    displacement: np.ndarray
+    pressure: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.t_ns, int | np.integer) or self.t_ns < 0:
+            raise FrameError(f"t_ns must be a non-negative integer of nanoseconds, got {self.t_ns!r}")
+        d = np.asarray(self.displacement, dtype=np.float64)
+        if d.ndim != 2 or d.shape[1] != 3:
+            raise FrameError(f"displacement must be an (N, 3) array, got shape {d.shape}")
+        bad = ~np.isfinite(d).all(axis=1)
+        if bad.any():
+            raise FrameError(
+                f"displacement has NaN/Inf at {int(bad.sum())} node(s), first node {int(np.argmax(bad))}"
+            )
+        object.__setattr__(self, "t_ns", int(self.t_ns))
+        object.__setattr__(self, "displacement", d)
+        if self.pressure is not None:
+            p = np.asarray(self.pressure, dtype=np.float64)
+            if p.shape != (len(d),):
+                raise FrameError(f"pressure must have shape ({len(d)},), got {p.shape}")
+            if not np.isfinite(p).all():
+                raise FrameError("pressure has NaN/Inf values")
+            object.__setattr__(self, "pressure", p)
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.displacement)
+
+    @classmethod
+    def rest(cls, n_nodes: int, t_ns: int = 0) -> TactileFrame:
+        return cls(t_ns, np.zeros((n_nodes, 3)))

@@ -1,0 +1,118 @@
+"""From a frame to what clients receive: deformed-node packets, contacts, actions.
+
+The processor keeps the little state a frame sequence needs (which nodes were
+deformed, the action state machine) and does no work a frame does not need: a
+frame with no node above ε costs one norm over the free nodes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .actions import ActionDetector, ActionParams
+from .contacts import Contact, WinklerForceModel, find_contacts
+from .frame import FrameError, TactileFrame
+from .mesh import SkinMesh
+
+__all__ = ["FrameProcessor", "FrameResult", "ProcessingParams"]
+
+
+@dataclass(frozen=True, slots=True)
+class ProcessingParams:
+    """Per-device processing settings (defaults documented in docs/processing.md)."""
+
+    epsilon_mm: float = 0.1
+    intensity_decimals: int = 3  # µm resolution in packets: smaller JSON, no visible loss
+    min_contact_nodes: int = 1
+    modulus_mpa: float = 0.069  # Ecoflex 00-30
+    thickness_mm: float = 3.0
+    actions: ActionParams = field(default_factory=ActionParams)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class FrameResult:
+    """What one frame produced. ``deformed`` is None when no packet is due."""
+
+    t_ns: int
+    deformed_nodes: np.ndarray  # indices with ‖D‖ > ε, ascending
+    intensity: np.ndarray  # their ‖D‖, mm
+    is_release: bool  # the packet is the final all-zero one
+    contacts: list[Contact]
+    actions: list[str]
+    packet_due: bool
+
+    def skin_deformed_detection(self) -> dict | None:
+        """The ``skinDeformedDetection`` event payload, or None if nothing to send.
+
+        A packet lists every node currently above ε (clients treat absent nodes
+        as at rest); the release packet lists the previously deformed nodes with
+        intensity 0.
+        """
+        if not self.packet_due:
+            return None
+        return {
+            "timeStamp": self.t_ns,
+            "numOfDeformedNodes": int(len(self.deformed_nodes)),
+            "arrayOfDeformedNodes": [
+                {"deformedNodeID": int(i), "deformedNodeIntensity": float(v)}
+                for i, v in zip(self.deformed_nodes.tolist(), self.intensity.tolist(), strict=True)
+            ],
+        }
+
+    def contact_information(self) -> dict:
+        """The ``contactInformation`` property value for this frame."""
+        return {
+            "numOfContacts": len(self.contacts),
+            "contactLocations": [_xyz(c.location) for c in self.contacts],
+            "contactForces": [_xyz(c.force) for c in self.contacts],
+        }
+
+
+def _xyz(v: np.ndarray) -> dict[str, float]:
+    return {"x": round(float(v[0]), 4), "y": round(float(v[1]), 4), "z": round(float(v[2]), 4)}
+
+
+class FrameProcessor:
+    """Stateful per-device processing of a frame sequence."""
+
+    def __init__(self, mesh: SkinMesh, params: ProcessingParams | None = None) -> None:
+        self.mesh = mesh
+        self.params = p = params or ProcessingParams()
+        if not p.epsilon_mm > 0:
+            raise ValueError(f"epsilon must be positive, got {p.epsilon_mm}")
+        self._free = mesh.free_indices
+        self._force = WinklerForceModel(mesh, p.modulus_mpa, p.thickness_mm)
+        self._actions = ActionDetector(p.actions)
+        self._prev_deformed = np.empty(0, dtype=np.int64)
+        self._last_t: int | None = None
+
+    def process(self, frame: TactileFrame) -> FrameResult:
+        if frame.n_nodes != self.mesh.n_nodes:
+            raise FrameError(f"frame has {frame.n_nodes} nodes, the mesh has {self.mesh.n_nodes}")
+        if self._last_t is not None and frame.t_ns < self._last_t:
+            raise FrameError(f"frame time {frame.t_ns} ns goes back from {self._last_t} ns")
+        self._last_t = frame.t_ns
+        d = frame.displacement
+        eps = self.params.epsilon_mm
+        free_d = d[self._free]
+        norm_free = np.sqrt(np.einsum("ij,ij->i", free_d, free_d))
+        above = norm_free > eps
+        deformed = self._free[above]
+        if deformed.size:
+            intensity_full = np.zeros(self.mesh.n_nodes)
+            intensity_full[self._free] = norm_free
+            contacts = find_contacts(
+                self.mesh, deformed, intensity_full, d, self._force, self.params.min_contact_nodes
+            )
+            intensity = np.round(norm_free[above], self.params.intensity_decimals)
+            is_release, due = False, True
+        else:
+            contacts = []
+            is_release = due = bool(self._prev_deformed.size)
+            deformed = self._prev_deformed if is_release else deformed
+            intensity = np.zeros(len(deformed))
+        self._prev_deformed = self._free[above]
+        actions = self._actions.update(frame.t_ns, contacts)
+        return FrameResult(frame.t_ns, deformed, intensity, is_release, contacts, actions, due)

@@ -1,0 +1,1 @@
+"""Tactile Thing Descriptions: vocabulary, builder, validation."""

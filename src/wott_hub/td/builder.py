@@ -1,0 +1,146 @@
+"""Build a device's Tactile TD (TD 1.1) and the values of its static properties."""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Callable
+from functools import cache
+from importlib import resources
+from typing import Any
+
+from wott_hub.tactile.device import DeviceDescription
+
+from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
+
+CONTEXT_PATH = "contexts/tactile-v1.jsonld"
+
+__all__ = [
+    "CONTEXT_PATH", "FormFactory", "build_tactile_td", "hub_forms", "static_property_values",
+    "tactile_context",
+]
+
+FormFactory = Callable[[str, str, dict[str, Any]], list[dict[str, Any]]]
+"""(kind 'property'|'event', affordance name, affordance) -> forms."""
+
+
+@cache
+def tactile_context() -> dict[str, Any]:
+    """The Tactile vocabulary's JSON-LD context document (served by the hub)."""
+    text = resources.files("wott_hub.td").joinpath("context/tactile-v1.jsonld").read_text()
+    return json.loads(text)
+
+
+def hub_forms(thing_path: str) -> FormFactory:
+    """Forms of the hub's HTTP layout: GET to read, SSE to observe and subscribe.
+
+    Every form states its ``op``, ``htv:methodName`` and, for streams, its
+    ``subprotocol``: node-wot picks forms by these and fails on guesses.
+    """
+
+    def forms(kind: str, name: str, affordance: dict[str, Any]) -> list[dict[str, Any]]:
+        if kind == "property":
+            href = f"{thing_path}/properties/{name}"
+            out = [{"href": href, "op": ["readproperty"], "htv:methodName": "GET",
+                    "contentType": "application/json"}]
+            if affordance.get("observable"):
+                out.append({"href": f"{href}/observe", "op": ["observeproperty"],
+                            "htv:methodName": "GET", "subprotocol": "sse",
+                            "contentType": "text/event-stream"})
+            return out
+        return [{"href": f"{thing_path}/events/{name}", "op": ["subscribeevent"],
+                 "htv:methodName": "GET", "subprotocol": "sse", "contentType": "text/event-stream"}]
+
+    return forms
+
+
+def build_tactile_td(
+    desc: DeviceDescription,
+    *,
+    base: str = "http://127.0.0.1:8080/",
+    forms: FormFactory | None = None,
+    context_url: str | None = None,
+) -> dict[str, Any]:
+    """The device's TD 1.1 document with the Tactile vocabulary.
+
+    ``context_url`` is where the Tactile JSON-LD context is served (by default
+    the hub at ``base``). TD 1.1 allows only prefix maps inline, so the ``tac``
+    prefix is also given inline for processors that do not dereference.
+    ``forms`` lets a binding (the servient) supply its own forms.
+    """
+    forms = forms or hub_forms(f"things/{desc.id}")
+    ctx: list[Any] = [*TD_CONTEXT, context_url or f"{base}{CONTEXT_PATH}", {"tac": TACTILE_NS}]
+    properties = {}
+    for name, schema in PROPERTIES.items():
+        aff = copy.deepcopy(schema)
+        aff["title"] = name
+        aff["forms"] = forms("property", name, aff)
+        properties[name] = aff
+    events = {}
+    for name, schema in EVENTS.items():
+        aff = copy.deepcopy(schema)
+        aff["title"] = name
+        aff["forms"] = forms("event", name, aff)
+        events[name] = aff
+    td: dict[str, Any] = {
+        "@context": ctx,
+        "@type": ["tac:TactileSensor"],
+        "id": f"urn:wott-hub:device:{desc.id}",
+        "title": desc.title,
+        "description": desc.description or f"{desc.family} tactile skin ({desc.mesh.n_nodes} nodes)",
+        "tac:family": desc.family,
+        "tac:epsilon": desc.epsilon_mm,
+        "base": base,
+        "securityDefinitions": {"nosec_sc": {"scheme": "nosec"}},
+        "security": "nosec_sc",
+        "properties": properties,
+        "events": events,
+    }
+    return td
+
+
+def static_property_values(desc: DeviceDescription) -> dict[str, Any]:
+    """Values of the properties that never change while the device runs.
+
+    Computed once per device and served as they are: the mesh is never re-sent
+    with events.
+    """
+    mesh, s, m, f = desc.mesh, desc.shape, desc.material, desc.frame
+
+    def pt(v) -> dict[str, float]:
+        return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+    shape: dict[str, Any] = {"shapeType": s.shape_type}
+    for key, value in (
+        ("lengthDimension", s.length_mm),
+        ("widthDimension", s.width_mm),
+        ("heightDimension", s.height_mm),
+        ("baseRadiusDimension", s.base_radius_mm),
+        ("middleRadiusDimension", s.middle_radius_mm),
+    ):
+        if value is not None:
+            shape[key] = float(value)
+    nodes = mesh.nodes.round(4).tolist()
+    return {
+        "skinMaterial": {"materialType": m.material_type, "materialShoreHardness": m.shore_hardness},
+        "skinShape": shape,
+        "skinNodes": {
+            "numOfNodes": mesh.n_nodes,
+            "arrayOfNodes": [
+                {"nodeID": i, "nodeLocation": {"x": x, "y": y, "z": z},
+                 "referenceTo": "sensorCoordinateFrame"}
+                for i, (x, y, z) in enumerate(nodes)
+            ],
+        },
+        "skinCells": {
+            "numOfCells": mesh.n_cells,
+            "arrayOfCells": [
+                {"cellID": i, "connectedNodes": c} for i, c in enumerate(mesh.cells.tolist())
+            ],
+        },
+        "sensorCoordinateFrame": {
+            "originLocation": {"originName": f.origin_name, **pt(f.origin)},
+            "axisOrientation": {"xAxis": pt(f.x_axis), "yAxis": pt(f.y_axis), "zAxis": pt(f.z_axis)},
+        },
+        "contactInformation": {"numOfContacts": 0, "contactLocations": [], "contactForces": []},
+    }

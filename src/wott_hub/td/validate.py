@@ -1,0 +1,188 @@
+"""Validate any TD against TD 1.1, the Tactile vocabulary and our interop rules,
+and Tactile payloads against the schema their TD declares.
+
+Every problem names the failing field by its JSON path, so a user can find it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from typing import Any
+
+import jsonschema
+from jsonschema.exceptions import ValidationError, best_match
+
+from .vocabulary import EVENTS, PROPERTIES, TD_CONTEXT
+
+__all__ = ["Problem", "validate_payload", "validate_td"]
+
+# TD-specific keywords that are not JSON Schema: dropped before payload validation
+_TD_ONLY = ("forms", "@type", "title", "titles", "descriptions", "observable", "unit",
+            "uriVariables", "readOnly", "writeOnly")
+
+
+@dataclass(frozen=True, slots=True)
+class Problem:
+    rule: str  # "td-1.1" | "tactile" | "interop" | "payload"
+    path: str  # JSON path of the failing field, e.g. $.properties.skinNodes.forms[0].op
+    message: str
+
+    def __str__(self) -> str:
+        return f"[{self.rule}] {self.path}: {self.message}"
+
+
+@cache
+def td_schema_validator() -> jsonschema.protocols.Validator:
+    text = resources.files("wott_hub.td").joinpath("data/td-1.1-json-schema.json").read_text()
+    schema = json.loads(text)
+    return jsonschema.Draft7Validator(schema, format_checker=jsonschema.Draft7Validator.FORMAT_CHECKER)
+
+
+def _shape_schema(ds: dict[str, Any]) -> dict[str, Any]:
+    """A schema that accepts data schemas declaring the same structure, types and units."""
+    props: dict[str, Any] = {}
+    required = []
+    if "type" in ds:
+        props["type"] = {"const": ds["type"]}
+        required.append("type")
+    if "unit" in ds:
+        props["unit"] = {"const": ds["unit"]}
+        required.append("unit")
+    if "enum" in ds:
+        props["enum"] = {"type": "array", "items": {"enum": ds["enum"]}}
+    if "properties" in ds:
+        props["properties"] = {
+            "type": "object",
+            "properties": {k: _shape_schema(v) for k, v in ds["properties"].items()},
+            "required": list(ds.get("required", [])),
+        }
+        required.append("properties")
+    if "items" in ds:
+        props["items"] = _shape_schema(ds["items"])
+        required.append("items")
+    return {"type": "object", "properties": props, "required": required}
+
+
+@cache
+def tactile_validator() -> jsonschema.protocols.Validator:
+    """The vocabulary's own schema for a TD: the affordances and their data shapes."""
+    prop_schemas = {}
+    for name, aff in PROPERTIES.items():
+        s = _shape_schema(aff)
+        if aff.get("observable"):
+            s["properties"]["observable"] = {"const": True}
+            s["required"].append("observable")
+        prop_schemas[name] = s
+    event_schemas = {
+        name: {"type": "object", "properties": {"data": _shape_schema(aff["data"])},
+               "required": ["data"]}
+        for name, aff in EVENTS.items()
+    }
+    schema = {
+        "type": "object",
+        "properties": {
+            "properties": {"type": "object", "properties": prop_schemas,
+                           "required": list(PROPERTIES)},
+            "events": {"type": "object", "properties": event_schemas, "required": list(EVENTS)},
+        },
+        "required": ["properties", "events"],
+    }
+    return jsonschema.Draft7Validator(schema)
+
+
+def _problems(validator: jsonschema.protocols.Validator, doc: Any, rule: str) -> list[Problem]:
+    out = []
+    errors = sorted(validator.iter_errors(doc), key=lambda e: list(map(str, e.absolute_path)))
+    for err in errors:
+        if err.context:  # oneOf/anyOf: report the branch that came closest
+            err = best_match(err.context)
+        if err.validator == "required" and isinstance(err.instance, dict):
+            out += [Problem(rule, f"{err.json_path}.{k}", "required field is missing")
+                    for k in err.validator_value if k not in err.instance]
+        else:
+            out.append(Problem(rule, err.json_path, _message(err)))
+    return list(dict.fromkeys(out))  # the TD schema's anyOf branches repeat some errors
+
+
+def _message(err: ValidationError) -> str:
+    """jsonschema's message, without pasting a whole sub-document into it."""
+    text = repr(err.instance)
+    if len(text) <= 80:
+        return err.message
+    short = text[:60] + "…"
+    return err.message.replace(text, short) if text in err.message else f"{err.validator} failed"
+
+
+def _interop_problems(td: dict[str, Any]) -> list[Problem]:
+    """Rules that make node-wot and wotpy clients accept our TDs (DESIGN.md section 2)."""
+    out = []
+    ctx = td.get("@context")
+    if not (isinstance(ctx, list) and ctx[:2] == TD_CONTEXT):
+        out.append(Problem("interop", "$['@context']",
+                           f"must be an array starting with {TD_CONTEXT} (node-wot needs v1 first)"))
+    for kind in ("properties", "actions", "events"):
+        for name, aff in (td.get(kind) or {}).items():
+            base = f"$.{kind}.{name}"
+            _find_empty_keywords(aff, base, out)
+            for i, form in enumerate(aff.get("forms") or []):
+                where = f"{base}.forms[{i}]"
+                if "op" not in form:
+                    out.append(Problem("interop", f"{where}.op", "every form must state its op"))
+                if str(form.get("href", "")).startswith(("http", "things/", "/")) or "base" in td:
+                    if "htv:methodName" not in form and not form.get("subprotocol") == "websocket":
+                        if not str(form.get("href", "")).startswith("ws"):
+                            out.append(Problem("interop", f"{where}['htv:methodName']",
+                                               "HTTP forms must state htv:methodName"))
+                if kind == "events" and "subprotocol" not in form and not str(
+                    form.get("href", "")).startswith("ws"):
+                    out.append(Problem("interop", f"{where}.subprotocol",
+                                       "event forms over HTTP must state their subprotocol"))
+    return out
+
+
+def _find_empty_keywords(node: Any, path: str, out: list[Problem]) -> None:
+    if isinstance(node, dict):
+        for k, v in node.items():
+            if k in ("oneOf", "anyOf", "allOf", "enum") and v == []:
+                out.append(Problem("interop", f"{path}.{k}", "empty keyword: not valid JSON Schema"))
+            elif k != "forms":
+                _find_empty_keywords(v, f"{path}.{k}", out)
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            _find_empty_keywords(v, f"{path}[{i}]", out)
+
+
+def validate_td(td: Any, *, tactile: bool = True, interop: bool = True) -> list[Problem]:
+    """All problems of a TD document; empty when it is valid."""
+    if not isinstance(td, dict):
+        return [Problem("td-1.1", "$", f"a TD must be a JSON object, got {type(td).__name__}")]
+    problems = _problems(td_schema_validator(), td, "td-1.1")
+    if tactile:
+        problems += _problems(tactile_validator(), td, "tactile")
+    if interop:
+        problems += _interop_problems(td)
+    return problems
+
+
+def affordance_schema(td: dict[str, Any], kind: str, name: str) -> dict[str, Any]:
+    """The JSON Schema a TD declares for a property value or an event's data."""
+    aff = td[{"property": "properties", "event": "events"}[kind]][name]
+    ds = aff.get("data", {}) if kind == "event" else aff
+    return _strip_td_keywords(ds)
+
+
+def _strip_td_keywords(ds: Any) -> Any:
+    if isinstance(ds, dict):
+        return {k: _strip_td_keywords(v) for k, v in ds.items() if k not in _TD_ONLY}
+    if isinstance(ds, list):
+        return [_strip_td_keywords(v) for v in ds]
+    return ds
+
+
+def validate_payload(td: dict[str, Any], kind: str, name: str, value: Any) -> list[Problem]:
+    """Problems of a property value or event payload against the schema its TD declares."""
+    validator = jsonschema.Draft7Validator(affordance_schema(td, kind, name))
+    return _problems(validator, value, "payload")
