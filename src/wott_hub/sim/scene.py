@@ -149,7 +149,8 @@ class Scene:
                 a, b = _on_surface(mesh, s.at), _on_surface(mesh, s.to)
                 centre = _on_surface(mesh, a + u * (b - a))
                 direction = (b - a) / max(np.linalg.norm(b - a), 1e-9)
-                out.append(Indenter(centre, depth, s.radius_mm, s.shear_mm * direction))
+                drag = s.shear_mm * depth / s.depth_mm  # shear ramps in and out with the depth
+                out.append(Indenter(centre, depth, s.radius_mm, drag * direction))
             elif s.kind == "pinch":
                 a, b = _on_surface(mesh, s.at), _on_surface(mesh, s.to)
                 gap = np.linalg.norm(b - a)

@@ -7,7 +7,7 @@ every device family. Each action is emitted once when its condition first holds:
   deepest node moved faster than ``collision_speed_mm_s`` since the last rest frame.
 - ``press``: a contact held for ``press_s`` without slipping.
 - ``slip``: the main contact moved tangentially more than ``slip_mm`` from where it
-  settled, or its mean shear exceeded ``slip_shear_ratio`` x its normal depth.
+  settled, or its mean shear exceeded ``slip_shear_ratio`` x its mean normal depth.
   It re-arms when the contact comes to rest again.
 - ``pinch``: two contacts whose distance shrank by ``pinch_mm`` since both appeared.
 - ``pat``: a touch shorter than ``pat_s`` (emitted just before its ``release``).
@@ -83,8 +83,7 @@ class ActionDetector:
             elif self._still_since is None:
                 self._still_since = t_ns
             moved = float(np.linalg.norm(main.location - self._anchor))
-            depth = max(main.peak, 1e-9)
-            sheared = float(np.linalg.norm(main.shear)) > p.slip_shear_ratio * depth
+            sheared = float(np.linalg.norm(main.shear)) > p.slip_shear_ratio * max(main.depth, 1e-9)
             if not self._slipping and (moved > p.slip_mm or sheared):
                 out.append("slip")
                 self._slipping = True

@@ -22,6 +22,7 @@ class Contact:
     intensity: float  # sum of the nodes' displacement norms, mm
     peak: float  # largest displacement norm in the patch, mm
     shear: np.ndarray  # (3,) mean tangential displacement, mm
+    depth: float  # mean normal displacement magnitude, mm
 
 
 class WinklerForceModel:
@@ -73,7 +74,8 @@ def find_contacts(
         total = float(w.sum())
         d = displacement[nodes]
         n = normals[nodes]
-        tangential = d - np.einsum("ij,ij->i", d, n)[:, None] * n
+        normal = np.einsum("ij,ij->i", d, n)
+        tangential = d - normal[:, None] * n
         contacts.append(
             Contact(
                 nodes=nodes,
@@ -82,6 +84,7 @@ def find_contacts(
                 intensity=total,
                 peak=float(w.max()),
                 shear=tangential.mean(axis=0),
+                depth=float(np.abs(normal).mean()),
             )
         )
     contacts.sort(key=lambda k: -k.intensity)
