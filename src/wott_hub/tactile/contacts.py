@@ -3,13 +3,20 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from .mesh import SkinMesh
 
-__all__ = ["Contact", "WinklerForceModel", "find_contacts"]
+__all__ = ["Contact", "ForceModel", "WinklerForceModel", "find_contacts"]
+
+
+class ForceModel(Protocol):
+    """Anything that turns a patch's displacements into the force on it (N, into the skin)."""
+
+    def force(self, nodes: np.ndarray, displacement: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -50,7 +57,7 @@ def find_contacts(
     deformed: np.ndarray,
     intensity: np.ndarray,
     displacement: np.ndarray,
-    force_model: WinklerForceModel,
+    force_model: ForceModel,
     min_nodes: int = 1,
 ) -> list[Contact]:
     """Split the deformed nodes into connected patches on the mesh graph.

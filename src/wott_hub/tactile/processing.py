@@ -29,6 +29,9 @@ class ProcessingParams:
     modulus_mpa: float = 0.069  # Ecoflex 00-30
     thickness_mm: float = 3.0
     actions: ActionParams = field(default_factory=ActionParams)
+    # "winkler": independent springs under each node (cheap); "stiffness": the Kelvin-Voigt skin's
+    # assembled stiffness (wott_hub.tactile.mechanics), exact for quasi-static presses
+    force_model: str = "winkler"
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -83,7 +86,14 @@ class FrameProcessor:
         if not p.epsilon_mm > 0:
             raise ValueError(f"epsilon must be positive, got {p.epsilon_mm}")
         self._free = mesh.free_indices
-        self._force = WinklerForceModel(mesh, p.modulus_mpa, p.thickness_mm)
+        if p.force_model == "winkler":
+            self._force = WinklerForceModel(mesh, p.modulus_mpa, p.thickness_mm)
+        elif p.force_model == "stiffness":
+            from .mechanics.forces import StiffnessForceModel  # assembles K once, here
+
+            self._force = StiffnessForceModel(mesh, p.modulus_mpa, p.thickness_mm)
+        else:
+            raise ValueError(f"force_model must be 'winkler' or 'stiffness', got {p.force_model!r}")
         self._actions = ActionDetector(p.actions)
         self._prev_deformed = np.empty(0, dtype=np.int64)
         self._last_t: int | None = None

@@ -1,0 +1,318 @@
+"""The directory itself: TDs in memory for reads and search, SQLAlchemy for durability.
+
+All TDs live in a dict (id -> Enriched TD) loaded at start and changed only
+after the database committed the change, so reads never touch the database
+and a failed write leaves both unchanged. Writes are serialised by one lock;
+each produces at most one lifecycle event, published after the commit.
+
+A write that changes nothing but the registration times (a producer
+refreshing its ttl) only moves ``expires``: it keeps ``modified`` and emits no
+event, so fleets of hubs refreshing their Things do not flood subscribers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import bisect
+import gc
+import heapq
+import logging
+import secrets
+import uuid
+from concurrent.futures import ThreadPoolExecutor
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy.engine import Engine
+
+from .errors import BadRequest, Forbidden, NotFound, ValidationFailed
+from .events import Event, EventHub
+from .mergepatch import apply_merge_patch, merge_diff
+from .registration import Enriched, enrich, iso, same_content
+from .search import SearchEngine
+from .selftd import directory_td
+from .settings import DirectorySettings
+from .store import StoredEvent, ThingStore
+from .validation import check_td
+
+__all__ = ["Directory"]
+
+log = logging.getLogger("wott_directory")
+
+
+class Directory:
+    """A Thing Description Directory; serve it with ``make_app`` or ``directory_handlers``."""
+
+    def __init__(self, settings: DirectorySettings | None = None, engine: Engine | str = "sqlite://") -> None:
+        self.settings = settings or DirectorySettings()
+        self.store = ThingStore(engine)
+        self.search_engine = SearchEngine(max_length=self.settings.max_query_length)
+        self.events = EventHub(self.settings.event_retention, self.settings.sse_queue)
+        self._things: dict[str, Enriched] = {}
+        self._anonymous: set[str] = set()
+        self._own: set[str] = set()
+        self._ids: list[str] = []
+        self._expiry: list[tuple[float, str]] = []
+        self._array: list[dict[str, Any]] | None = None
+        self._lock = asyncio.Lock()
+        self._boot = secrets.token_hex(4)
+        self._version = 0
+        self._trimmed_to = 0
+        self._writes_since_freeze = 0
+        self._purge_task: asyncio.Task[None] | None = None
+        self._search_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wott-directory-search")
+        self.started = False
+
+    # -- life cycle ------------------------------------------------------------
+    async def start(self) -> None:
+        """Create the tables if needed, load TDs and recent events, publish our own TD, start purging."""
+        things, events = await self.store.open(self.settings.event_retention)
+        for t in things:
+            rec = Enriched.from_stored(t.td)
+            self._things[t.id] = rec
+            if t.anonymous:
+                self._anonymous.add(t.id)
+            if t.own:
+                self._own.add(t.id)
+            if rec.expires is not None:
+                self._expiry.append((rec.expires.timestamp(), t.id))
+        self._ids = sorted(self._things)
+        heapq.heapify(self._expiry)
+        self.events.restore(Event(e.id, e.type, e.thing_id, e.data) for e in events)
+        self._trimmed_to = max(0, self.events.last_id - self.settings.event_retention)
+        self._writes_since_freeze = 0
+        if self.settings.freeze_gc:
+            gc.freeze()
+        self.started = True
+        await self._publish_self()
+        await self.purge()
+        self._purge_task = asyncio.create_task(self._purge_loop())
+
+    async def stop(self) -> None:
+        """End SSE streams, stop purging, release the database (the engine too if we made it)."""
+        self.events.close_all()
+        if self._purge_task is not None:
+            self._purge_task.cancel()
+            try:
+                await self._purge_task
+            except asyncio.CancelledError:
+                pass
+            self._purge_task = None
+        self._search_executor.shutdown(wait=True)
+        await self.store.close()
+        self.started = False
+
+    async def set_base_url(self, base_url: str) -> None:
+        """Where the directory is reachable, once the server knows its port; re-publishes our TD."""
+        self.settings = self.settings.with_base_url(base_url)
+        if self.started:
+            await self._publish_self()
+
+    @property
+    def own_id(self) -> str:
+        return self.settings.own_id
+
+    def own_td(self) -> dict[str, Any]:
+        return self.get(self.own_id)
+
+    async def _publish_self(self) -> None:
+        td = directory_td(self.settings)
+        async with self._lock:
+            for stale in sorted(self._own - {td["id"]}):
+                if stale in self._things:
+                    await self._delete_locked(stale)
+            self._own = {td["id"]}
+            await self._put_locked(td["id"], td, anonymous=False)
+
+    # -- reads -----------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._ids)
+
+    def __contains__(self, thing_id: object) -> bool:
+        return thing_id in self._things
+
+    @property
+    def etag(self) -> str:
+        """Changes whenever the collection does (any create, update, refresh, delete)."""
+        return f"{self._boot}-{self._version}"
+
+    def get(self, thing_id: str, retrieved: str | None = None) -> dict[str, Any]:
+        rec = self._things.get(thing_id)
+        if rec is None:
+            raise NotFound(f"No TD with id {thing_id!r}")
+        return _served(rec.td, retrieved or iso(datetime.now(UTC)))
+
+    def page(self, offset: int, limit: int) -> tuple[list[dict[str, Any]], int]:
+        """TDs ``offset``..``offset+limit`` in ascending id (code point) order, and the total."""
+        retrieved = iso(datetime.now(UTC))
+        ids = self._ids[offset:offset + limit]
+        return [_served(self._things[i].td, retrieved) for i in ids], len(self._ids)
+
+    def snapshot(self) -> list[dict[str, Any]]:
+        """The array JSONPath queries run on (shared, never mutated: treat as read-only)."""
+        if self._array is None:
+            self._array = [self._things[i].td for i in self._ids]
+        return self._array
+
+    async def search(self, query: str) -> list[Any]:
+        """Values the RFC 9535 query selects from the array of all TDs (400 on a bad query)."""
+        compiled = self.search_engine.compile(query)
+        data = self.snapshot()
+        return await asyncio.get_running_loop().run_in_executor(self._search_executor, compiled.run, data)
+
+    # -- writes ----------------------------------------------------------------
+    async def put(self, thing_id: str, td: Any) -> bool:
+        """Create or replace the TD ``thing_id`` (PUT); True if it was created."""
+        if not isinstance(td, dict):
+            check_td(td)
+        if "id" not in td:
+            raise ValidationFailed([{"field": "$.id", "description": "a TD sent with PUT must have an id; "
+                                                                     "POST /things creates anonymous TDs"}])
+        if td["id"] != thing_id:
+            raise ValidationFailed([{"field": "$.id", "description":
+                                     f"{td['id']!r} does not match the id in the URL ({thing_id!r})"}])
+        self._check_not_own(thing_id)
+        check_td(td)
+        async with self._lock:
+            return await self._put_locked(thing_id, td, anonymous=thing_id in self._anonymous)
+
+    async def create_anonymous(self, td: Any) -> str:
+        """Register a TD without id (POST); returns the ``urn:uuid`` id it was given."""
+        if isinstance(td, dict) and "id" in td:
+            raise ValidationFailed([{"field": "$.id", "description":
+                                     "a TD with an id must be created with PUT /things/{id}"}])
+        if not isinstance(td, dict):
+            check_td(td)
+        thing_id = f"urn:uuid:{uuid.uuid4()}"
+        with_id: dict[str, Any] = {}
+        for key, value in td.items():
+            with_id[key] = value
+            if key == "@context":
+                with_id["id"] = thing_id
+        if "id" not in with_id:
+            with_id = {"id": thing_id, **with_id}
+        check_td(with_id)
+        async with self._lock:
+            await self._put_locked(thing_id, with_id, anonymous=True)
+        return thing_id
+
+    async def patch(self, thing_id: str, patch: Any) -> None:
+        """Apply a JSON merge patch, then validate the result as a whole TD."""
+        if not isinstance(patch, dict):
+            raise BadRequest("A merge patch of a TD must be a JSON object (a Partial TD)")
+        self._check_not_own(thing_id)
+        async with self._lock:
+            prev = self._things.get(thing_id)
+            if prev is None:
+                raise NotFound(f"No TD with id {thing_id!r}")
+            candidate = apply_merge_patch(prev.td, patch)
+            if candidate.get("id") != thing_id:
+                raise ValidationFailed([{"field": "$.id",
+                                         "description": "the id of a TD cannot be changed or removed"}])
+            check_td(candidate)
+            await self._put_locked(thing_id, candidate, anonymous=thing_id in self._anonymous)
+
+    async def delete(self, thing_id: str) -> None:
+        self._check_not_own(thing_id)
+        async with self._lock:
+            if thing_id not in self._things:
+                raise NotFound(f"No TD with id {thing_id!r}")
+            await self._delete_locked(thing_id)
+
+    def _check_not_own(self, thing_id: str) -> None:
+        if thing_id == self.own_id:
+            raise Forbidden("The directory's own TD is managed by the directory")
+
+    async def _put_locked(self, thing_id: str, td: dict[str, Any], anonymous: bool) -> bool:
+        prev = self._things.get(thing_id)
+        now = datetime.now(UTC)
+        rec = enrich(td, now, prev)
+        event: Event | None = None
+        if prev is not None and same_content(prev.td, rec.td):
+            reg = {**rec.td["registration"], "modified": iso(prev.modified)}
+            rec = Enriched({**rec.td, "registration": reg}, prev.created, prev.modified, rec.expires)
+        elif prev is not None:
+            event = Event(self.events.next_id(), "thing_updated", thing_id,
+                          {"id": thing_id, **merge_diff(prev.td, rec.td)})
+        else:
+            event = Event(self.events.next_id(), "thing_created", thing_id, rec.td)
+        row = {"id": thing_id, "td": rec.td, "anonymous": anonymous, "own": thing_id in self._own,
+               "created": rec.created,
+               "modified": rec.modified, "expires": rec.expires}
+        await self.store.write(upserts=[row], events=[_stored(event)] if event else [],
+                               new_ids=[] if prev else [thing_id])
+        self._things[thing_id] = rec
+        if prev is None:
+            bisect.insort(self._ids, thing_id)
+            if anonymous:
+                self._anonymous.add(thing_id)
+        if rec.expires is not None:
+            heapq.heappush(self._expiry, (rec.expires.timestamp(), thing_id))
+        self._changed()
+        if event is not None:
+            self.events.publish(event)
+        return prev is None
+
+    async def _delete_locked(self, thing_id: str, reason: str = "deleted") -> None:
+        event = Event(self.events.next_id(), "thing_deleted", thing_id, None)
+        await self.store.write(deletes=[thing_id], events=[_stored(event)])
+        del self._things[thing_id]
+        self._anonymous.discard(thing_id)
+        i = bisect.bisect_left(self._ids, thing_id)
+        del self._ids[i]
+        self._changed()
+        self.events.publish(event)
+        log.debug("TD %s %s", thing_id, reason)
+
+    def _changed(self) -> None:
+        self._version += 1
+        self._array = None
+        if self.settings.freeze_gc:
+            self._writes_since_freeze += 1
+            if self._writes_since_freeze >= self.settings.freeze_every:
+                gc.freeze()
+                self._writes_since_freeze = 0
+
+    # -- expiry ----------------------------------------------------------------
+    async def purge(self) -> list[str]:
+        """Delete the TDs past their ``expires`` now; returns their ids."""
+        now = datetime.now(UTC).timestamp()
+        if not self._expiry or self._expiry[0][0] > now:
+            await self._trim_events()
+            return []
+        purged = []
+        async with self._lock:
+            while self._expiry and self._expiry[0][0] <= now:
+                stamp, thing_id = heapq.heappop(self._expiry)
+                rec = self._things.get(thing_id)
+                if rec is None or rec.expires is None or rec.expires.timestamp() != stamp:
+                    continue  # deleted or re-registered since: a stale heap entry
+                await self._delete_locked(thing_id, "expired")
+                purged.append(thing_id)
+        await self._trim_events()
+        return purged
+
+    async def _trim_events(self) -> None:
+        keep_after = self.events.last_id - self.settings.event_retention
+        if keep_after > self._trimmed_to:
+            await self.store.trim_events(keep_after)
+            self._trimmed_to = keep_after
+
+    async def _purge_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.settings.purge_interval)
+            try:
+                await self.purge()
+            except Exception:  # a database hiccup must not end purging for good
+                log.exception("purging expired TDs failed; retrying in %.1f s", self.settings.purge_interval)
+
+
+def _served(td: dict[str, Any], retrieved: str) -> dict[str, Any]:
+    out = dict(td)
+    out["registration"] = {**td.get("registration", {}), "retrieved": retrieved}
+    return out
+
+
+def _stored(event: Event) -> StoredEvent:
+    return StoredEvent(event.id, event.type, event.thing_id, event.data)
+

@@ -1,0 +1,61 @@
+"""Alembic environment of the wott-hub history database.
+
+The hub runs migrations itself at start-up (``wott_hub.history.db.upgrade``),
+passing its open connection in ``config.attributes["connection"]``. From the
+command line (``uv run alembic upgrade head`` at the repo root) the URL comes
+from ``-x url=...``, else ``$WOTT_HUB_DATABASE``, else ``alembic.ini``.
+"""
+
+from __future__ import annotations
+
+import os
+
+from alembic import context
+from sqlalchemy import create_engine
+
+from wott_hub.history.models import Base
+
+config = context.config
+target_metadata = Base.metadata
+
+
+def _url() -> str:
+    return (context.get_x_argument(as_dictionary=True).get("url")
+            or os.environ.get("WOTT_HUB_DATABASE")
+            or config.get_main_option("sqlalchemy.url"))
+
+
+def _configure(connection) -> None:
+    context.configure(
+        connection=connection,
+        target_metadata=target_metadata,
+        render_as_batch=connection.dialect.name == "sqlite",  # SQLite cannot ALTER most things
+        compare_type=True,
+    )
+
+
+def run_offline() -> None:
+    context.configure(url=_url(), target_metadata=target_metadata, literal_binds=True)
+    with context.begin_transaction():
+        context.run_migrations()
+
+
+def run_online() -> None:
+    connection = config.attributes.get("connection")
+    if connection is not None:
+        _configure(connection)
+        with context.begin_transaction():
+            context.run_migrations()
+        return
+    engine = create_engine(_url())
+    with engine.connect() as conn:
+        _configure(conn)
+        with context.begin_transaction():
+            context.run_migrations()
+    engine.dispose()
+
+
+if context.is_offline_mode():
+    run_offline()
+else:
+    run_online()

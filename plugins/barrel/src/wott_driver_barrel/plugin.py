@@ -1,0 +1,42 @@
+"""The wott-hub plugin of the barrel vision skin (entry point ``barrel``): family ``barrel-vision``.
+
+Importing this module imports neither cv2 nor onnxruntime: the hooks describe
+the family and wire a driver together. Opening a device loads its ONNX model
+(onnxruntime), so a model that does not fit is refused right there; the
+cameras (cv2) are opened by the driver's worker thread when the device starts.
+"""
+
+from __future__ import annotations
+
+from wott_hub.drivers.base import DriverError
+from wott_hub.plugins import DeviceConfig, FamilyInfo, hookimpl
+
+from .settings import FAMILY, SCHEMA, open_barrel
+
+__all__ = ["wott_hub_demo_devices", "wott_hub_families", "wott_hub_open_device"]
+
+
+@hookimpl
+def wott_hub_families() -> list[FamilyInfo]:
+    return [FamilyInfo(
+        FAMILY,
+        "Barrel vision skin (TacLink-style): two fisheye cameras inside a barrel skin with 16 x 16 "
+        "markers; marker tracking and an ONNX model give the 585 free nodes' displacement "
+        "(docs/barrel-vision.md).",
+        SCHEMA,
+    )]
+
+
+@hookimpl
+def wott_hub_open_device(config: DeviceConfig):
+    if config.family != FAMILY:
+        return None
+    try:
+        return open_barrel(config.id, dict(config.settings))
+    except DriverError as e:
+        raise DriverError(f"device {config.id!r} (family {FAMILY!r}): {e}") from None
+
+
+@hookimpl
+def wott_hub_demo_devices() -> list[DeviceConfig]:
+    return [DeviceConfig("barrel-1", FAMILY, {"title": "Barrel vision skin (simulated)", "source": "sim"})]

@@ -1,0 +1,209 @@
+"""The ``flat-vision`` family's device settings: their JSON Schema and how a driver is built from them.
+
+Nothing here imports cv2: building a driver only wires objects together; the
+camera is opened (and cv2 imported) inside the driver's worker thread.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from wott_hub.drivers.backoff import Backoff
+from wott_hub.drivers.base import DriverError
+from wott_hub.sim.scene import Scene, SceneError
+from wott_hub.tactile import MATERIALS, CoordinateFrame, DeviceDescription, SkinShape
+
+from .camera import PadOptics
+from .depth import DepthModel
+from .geometry import GRID_MAX, GRID_MIN, PadLayout
+from .simulator import RenderSettings
+
+__all__ = ["FAMILY", "SCHEMA", "demo_scene_path", "open_pad"]
+
+FAMILY = "flat-vision"
+
+
+def demo_scene_path() -> Path:
+    return Path(str(resources.files("wott_driver_flatpad") / "scenes" / "demo.toml"))
+
+
+def _num(default: float, description: str, **extra: Any) -> dict[str, Any]:
+    return {"type": "number", "default": default, "description": description, **extra}
+
+
+OPTICS_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "description": "Pinhole camera under the gel (docs/flat-pad.md, camera model).",
+    "default": {},
+    "additionalProperties": False,
+    "properties": {
+        "width": {"type": "integer", "minimum": 16, "default": 640, "description": "Image width, px."},
+        "height": {"type": "integer", "minimum": 16, "default": 480, "description": "Image height, px."},
+        "focal_px": _num(480.0, "Focal length, px.", exclusiveMinimum=0),
+        "air_gap_mm": _num(20.0, "Lens to acrylic, mm.", exclusiveMinimum=0),
+        "acrylic_mm": _num(3.0, "Acrylic plate thickness, mm.", minimum=0),
+        "acrylic_n": _num(1.49, "Refractive index of the acrylic.", minimum=1),
+        "gel_n": _num(1.41, "Refractive index of the gel.", minimum=1),
+        "principal_px": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+                         "description": "Principal point (cx, cy), px; default the image centre."},
+        "centre_mm": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+                      "description": "Device (x, y) on the optical axis, mm; default the pad centre."},
+    },
+}
+
+RENDER_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "description": "Simulator image chain (source = \"sim\" only).",
+    "default": {},
+    "additionalProperties": False,
+    "properties": {
+        "blur_sigma": _num(1.0, "Gaussian lens blur, px.", minimum=0),
+        "noise_std": _num(2.0, "Sensor noise, grey levels.", minimum=0),
+        "seed": {"type": "integer", "default": 0, "description": "Noise seed."},
+        "refine": {"type": "integer", "minimum": 1, "maximum": 8, "default": 2,
+                   "description": "Ground-truth marker-area grid: pitch / refine."},
+    },
+}
+
+SCHEMA: dict[str, Any] = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "flat-vision device settings",
+    "type": "object",
+    "additionalProperties": False,
+    "properties": {
+        "title": {"type": "string", "description": "Human-readable name; default the device id."},
+        "rows": {"type": "integer", "minimum": GRID_MIN, "maximum": GRID_MAX, "default": 16,
+                 "description": "Marker rows (along device y)."},
+        "cols": {"type": "integer", "minimum": GRID_MIN, "maximum": GRID_MAX, "default": 16,
+                 "description": "Marker columns (along device x)."},
+        "pitch_mm": _num(1.5, "Marker spacing, mm.", exclusiveMinimum=0),
+        "marker_radius_mm": _num(0.35, "Printed marker radius, mm (< 0.3 pitch).", exclusiveMinimum=0),
+        "thickness_mm": _num(4.0, "Gel thickness, mm.", exclusiveMinimum=0),
+        "material": {"type": "string", "enum": sorted(MATERIALS), "default": "ecoflex-00-50",
+                     "description": "Gel material."},
+        "epsilon_mm": _num(0.1, "Displacement above which a node counts as deformed, mm (above the "
+                           "~0.07 mm image-noise floor at rest, docs/flat-pad.md).",
+                           exclusiveMinimum=0),
+        "source": {"oneOf": [{"type": "integer", "minimum": 0}, {"type": "string", "minLength": 1}],
+                   "default": "sim",
+                   "description": "\"sim\" (simulator), a camera index, or a video file / image "
+                                  "sequence pattern / stream URL."},
+        "scene": {"type": "string", "default": "",
+                  "description": "Scene TOML the simulator plays; empty: the bundled demo scene."},
+        "fps": _num(60.0, "Simulator frame rate, frames/s.", exclusiveMinimum=0),
+        "realtime": {"type": "boolean", "default": True,
+                     "description": "Simulator paces frames like a camera (false: as fast as read)."},
+        "depth_model": {"type": "string", "default": "physical",
+                        "description": "\"physical\" (ideal optics), \"calibrate\" (fit on simulated "
+                                       "presses at start-up) or a JSON file written by DepthModel.save."},
+        "parallax": {"type": "boolean", "default": True,
+                     "description": "Correct marker areas for the foreshortening of a sloped gel seen "
+                                    "off-axis (docs/flat-pad.md); false: area ratio read as depth alone."},
+        "backoff_initial_s": _num(0.05, "First reconnect delay, s.", exclusiveMinimum=0),
+        "backoff_cap_s": _num(5.0, "Longest reconnect delay, s.", exclusiveMinimum=0),
+        "optics": OPTICS_SCHEMA,
+        "render": RENDER_SCHEMA,
+    },
+}
+
+
+def _defaults(schema: dict[str, Any], given: dict[str, Any]) -> dict[str, Any]:
+    out = {k: v["default"] for k, v in schema["properties"].items() if "default" in v}
+    out.update(given)
+    unknown = sorted(set(given) - set(schema["properties"]))
+    if unknown:
+        raise DriverError(f"unknown setting(s) {', '.join(unknown)}")
+    return out
+
+
+def layout_from(settings: dict[str, Any]) -> PadLayout:
+    s = _defaults(SCHEMA, settings)
+    try:
+        o = _defaults(OPTICS_SCHEMA, dict(s.get("optics") or {}))
+        for key in ("principal_px", "centre_mm"):
+            if key in o:
+                o[key] = tuple(float(v) for v in o[key])
+        optics = PadOptics(gel_mm=float(s["thickness_mm"]), **o)
+        return PadLayout(int(s["rows"]), int(s["cols"]), float(s["pitch_mm"]),
+                         float(s["marker_radius_mm"]), optics)
+    except (TypeError, ValueError) as e:
+        raise DriverError(f"flat-vision settings: {e}") from None
+
+
+def describe(device_id: str, settings: dict[str, Any], layout: PadLayout) -> DeviceDescription:
+    s = _defaults(SCHEMA, settings)
+    span_x = (layout.cols - 1) * layout.pitch_mm
+    span_y = (layout.rows - 1) * layout.pitch_mm
+    return DeviceDescription(
+        id=device_id, title=str(s.get("title") or device_id), family=FAMILY,
+        shape=SkinShape("rectangularPrism", length_mm=span_x, width_mm=span_y,
+                        height_mm=float(s["thickness_mm"])),
+        material=MATERIALS[s["material"]], mesh=layout.mesh, epsilon_mm=float(s["epsilon_mm"]),
+        thickness_mm=float(s["thickness_mm"]), frame=CoordinateFrame(origin_name="cornerOfPad"),
+        description=f"Flat vision pad: {layout.rows}x{layout.cols} markers at {layout.pitch_mm} mm, "
+                    f"one camera at {layout.optics.px_per_mm:.1f} px/mm.",
+    )
+
+
+def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None = None):
+    """A ``FlatPadDriver`` for these settings (nothing is opened until it runs)."""
+    from .driver import FlatPadDriver
+    from .estimator import PadEstimator
+    from .simulator import PadSimulator, SimulatedCamera
+
+    s = _defaults(SCHEMA, settings)
+    if s["material"] not in MATERIALS:
+        raise DriverError(f"material: {s['material']!r} is not one of {', '.join(sorted(MATERIALS))}")
+    layout = layout_from(settings)
+    description = describe(device_id, settings, layout)
+    try:
+        render = RenderSettings(**_defaults(RENDER_SCHEMA, dict(s.get("render") or {})))
+    except TypeError as e:
+        raise DriverError(f"render: {e}") from None
+    spec = str(s["depth_model"])
+    estimator = PadEstimator(layout, None if spec == "calibrate" else _depth_model(spec, layout),
+                             parallax=bool(s["parallax"]))
+    prepare = None
+    if spec == "calibrate":
+        def prepare() -> None:
+            from .calibration import calibrate
+
+            estimator.depth_model = calibrate(layout, render, parallax=estimator.solver.parallax)
+    try:
+        backoff = Backoff(initial_s=float(s["backoff_initial_s"]), cap_s=float(s["backoff_cap_s"]))
+    except ValueError as e:
+        raise DriverError(f"backoff_initial_s/backoff_cap_s: {e}") from None
+    source = s["source"]
+    if source == "sim":
+        try:
+            scene = Scene.load(s["scene"] or demo_scene_path())
+        except SceneError as e:
+            raise DriverError(f"scene: {e}") from None
+        fps, realtime = float(s["fps"]), bool(s["realtime"])
+        if not fps > 0:
+            raise DriverError(f"fps: must be positive, got {fps}")
+
+        def open_source():
+            return SimulatedCamera(PadSimulator(layout, scene, render), fps, realtime=realtime)
+
+        name = f"simulator ({scene.name})"
+    else:
+        def open_source():
+            from wott_vision.camera import open_source as open_camera
+
+            return open_camera(source)
+
+        name = f"camera {source!r}"
+    return FlatPadDriver(description, estimator, open_source, source_name=name, backoff=backoff,
+                         max_frames=max_frames, prepare=prepare)
+
+
+def _depth_model(spec: str, layout: PadLayout) -> DepthModel:
+    if spec == "physical":
+        return DepthModel.physical(layout.optics)
+    try:
+        return DepthModel.load(spec)
+    except ValueError as e:
+        raise DriverError(f"depth_model: {e}") from None

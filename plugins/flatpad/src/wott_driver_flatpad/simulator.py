@@ -1,0 +1,151 @@
+"""A simulated flat vision pad: a scripted scene in, camera images out.
+
+The scene's ground truth displacement (``Scene.displacement_at``) moves each
+marker; the optics project it into the image. A marker is a small patch of
+the gel surface, so its image area is R² π times the local area scale of the
+mapping from the rest surface to the image, det(∂p/∂X0): that one number holds
+the magnification of a closer marker, the in-plane stretch of the gel and the
+foreshortening of a sloped surface seen off-axis (depth.py). It is computed on
+the same scene evaluated on a grid ``refine`` times finer than the markers
+(central differences over pitch / refine), so it is the local value, not the
+marker-grid average the estimator's finite differences see; markers are drawn
+as discs of that area (the ellipse a stretched marker really makes has the
+same area, which is all the depth cue uses). The shared renderer (``wott_vision.render``) draws the
+markers with blur and sensor noise, so the real detector and tracker run on
+the result.
+
+``SimulatedCamera`` wraps it as a VideoCapture-like reader, so the driver
+drives a simulated pad exactly as it drives a USB camera.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from wott_hub.sim.scene import Scene
+from wott_hub.tactile import flat_pad
+
+from .geometry import PadLayout
+
+__all__ = ["PadSimulator", "RenderSettings", "SimulatedCamera"]
+
+
+@dataclass(frozen=True, slots=True)
+class RenderSettings:
+    blur_sigma: float = 1.0  # px: lens blur
+    noise_std: float = 2.0  # grey levels: sensor noise
+    seed: int = 0
+    refine: int = 2  # ground-truth marker-area grid: pitch / refine
+
+
+class PadSimulator:
+    """Renders the marker image of ``scene`` at any scene time."""
+
+    def __init__(self, layout: PadLayout, scene: Scene, render: RenderSettings | None = None) -> None:
+        self.layout = layout
+        self.scene = scene
+        self.render_settings = render or RenderSettings()
+        k = max(1, int(self.render_settings.refine))
+        self._k = k
+        self._fine = flat_pad((layout.rows - 1) * k + 1, (layout.cols - 1) * k + 1,
+                              pitch_mm=layout.pitch_mm / k, name="flat-pad-fine")
+        self._rng = np.random.default_rng(self.render_settings.seed)
+        self._rest_radius = np.full(layout.n_markers, layout.marker_radius_mm)
+
+    def truth(self, t_s: float) -> np.ndarray:
+        """Ground-truth displacement (N x 3 mm) of the markers at scene time ``t_s``."""
+        if not self.scene.indenters_at(t_s, self.layout.mesh):
+            return np.zeros((self.layout.n_markers, 3))
+        return self.scene.displacement_at(t_s, self.layout.mesh)
+
+    def area_scale(self, t_s: float) -> np.ndarray:
+        """det(∂p/∂X0) (px² per mm²) of the rest-surface-to-image mapping at each marker."""
+        lay, k, o = self.layout, self._k, self.layout.optics
+        if not self.scene.indenters_at(t_s, self._fine):
+            d = np.zeros_like(self._fine.nodes)
+        else:
+            d = self.scene.displacement_at(t_s, self._fine)
+        fr, fc = (lay.rows - 1) * k + 1, (lay.cols - 1) * k + 1
+        px = o.project(self._fine.nodes + d, lay.axis_mm).reshape(fr, fc, 2)
+        h = lay.pitch_mm / k
+        d_c = np.gradient(px, h, axis=1)[::k, ::k]
+        d_r = np.gradient(px, h, axis=0)[::k, ::k]
+        return (d_c[..., 0] * d_r[..., 1] - d_r[..., 0] * d_c[..., 1]).ravel()
+
+    def markers(self, t_s: float, truth: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Image positions (M, 2) px and radii (M,) px of the markers at ``t_s``."""
+        lay, o = self.layout, self.layout.optics
+        d = self.truth(t_s) if truth is None else truth
+        px = o.project(lay.mesh.nodes + d, lay.axis_mm)
+        radius = self._rest_radius * np.sqrt(np.clip(self.area_scale(t_s), 1e-6, None))
+        return px, radius
+
+    def render(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(image (H, W) uint8, ground truth (N, 3) mm) at scene time ``t_s``."""
+        from wott_vision.render import render_markers
+
+        truth = self.truth(t_s)
+        px, radius = self.markers(t_s, truth)
+        r = self.render_settings
+        o = self.layout.optics
+        img = render_markers(px, radius, size=(o.height, o.width), blur_sigma=r.blur_sigma,
+                             noise_std=r.noise_std, rng=self._rng)
+        return img, truth
+
+
+class SimulatedCamera:
+    """VideoCapture-like reader over a ``PadSimulator`` at ``fps``.
+
+    ``realtime`` paces ``read()`` like a camera (frame k is due k / fps after
+    the first read, missed frames are skipped); otherwise frames come as fast
+    as they are read, still spaced 1 / fps in scene time. A scene that does not
+    loop ends: ``read()`` then returns ``(False, None)`` and ``ended`` is true.
+    ``t_s`` and ``truth`` describe the frame last read (for tests and benchmarks).
+    """
+
+    def __init__(self, simulator: PadSimulator, fps: float = 60.0, *, realtime: bool = True,
+                 start_s: float = 0.0) -> None:
+        if not (np.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be a positive number, got {fps!r}")
+        self.simulator = simulator
+        self.fps = float(fps)
+        self.realtime = realtime
+        self.start_s = float(start_s)
+        self.frame_index = 0
+        self.t_s = self.start_s
+        self.truth: np.ndarray | None = None
+        self.ended = False
+        self._opened = True
+        self._mono0: float | None = None
+
+    def isOpened(self) -> bool:  # noqa: N802 - the cv2.VideoCapture spelling
+        return self._opened
+
+    def read(self) -> tuple[bool, np.ndarray | None]:
+        if not self._opened or self.ended:
+            return False, None
+        period = 1.0 / self.fps
+        if self.realtime:
+            now = time.monotonic()
+            if self._mono0 is None:
+                self._mono0 = now
+            due = self._mono0 + self.frame_index * period
+            if due > now:
+                time.sleep(due - now)
+            elif now - due > period:
+                self.frame_index = int((now - self._mono0) / period)
+        scene = self.simulator.scene
+        t = self.start_s + self.frame_index * period
+        if not scene.loop and t > scene.duration_s:
+            self.ended = True
+            return False, None
+        img, truth = self.simulator.render(t)
+        self.t_s, self.truth = t, truth
+        self.frame_index += 1
+        return True, img
+
+    def release(self) -> None:
+        self._opened = False

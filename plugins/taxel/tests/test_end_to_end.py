@@ -1,0 +1,185 @@
+"""Scene in, bytes on a real pty, frames out: the recovered displacement matches the ground truth.
+
+Stated tolerance: every node of every frame within half a count of the taxel's
+16-bit value (``Compliance.quantum_mm / 2``, 1.3e-4 mm for 3 mm of Ecoflex
+00-30 at 0.01 kPa per count) of the ground truth, for scenes without shear
+(a pressure taxel cannot sense shear; with shear, the normal component matches).
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+from wott_driver_taxel.compliance import Compliance
+from wott_driver_taxel.driver import TaxelDriver
+from wott_driver_taxel.plugin import open_taxel_device
+from wott_driver_taxel.simulator import TaxelSimulator
+
+from wott_hub.drivers.base import DriverError, Health
+from wott_hub.plugins import DeviceConfig, Registry
+from wott_hub.sim.scene import Scene
+from wott_hub.tactile import flat_pad
+
+# Every gesture within 1.1 s, so a test plays the whole scene at 200 frames/s in about a second.
+SCENE = """
+[scene]
+name = "e2e"
+loop = true
+[[step]]
+kind = "press"
+at = [20.0, 14.0, 0.0]
+start_s = 0.05
+duration_s = 0.3
+depth_mm = 2.0
+radius_mm = 10.0
+[[step]]
+kind = "slide"
+at = [6.0, 6.0, 0.0]
+to = [30.0, 22.0, 0.0]
+start_s = 0.4
+duration_s = 0.3
+depth_mm = 1.0
+radius_mm = 8.0
+[[step]]
+kind = "tap"
+at = [30.0, 6.0, 0.0]
+start_s = 0.75
+depth_mm = 1.5
+radius_mm = 6.0
+[[step]]
+kind = "pinch"
+at = [4.0, 14.0, 0.0]
+to = [36.0, 14.0, 0.0]
+approach_mm = 12.0
+start_s = 0.8
+duration_s = 0.3
+depth_mm = 1.2
+radius_mm = 6.0
+"""
+RATE = 200.0
+
+
+@pytest.fixture(scope="module")
+def registry() -> Registry:
+    return Registry(only=["taxel"])
+
+
+async def play(driver, n_frames: int):
+    """(frame, ground truth) pairs for the first n frames, checked against the simulator's record."""
+    pairs = []
+    async for f in driver.frames():
+        truth = driver.simulator.truth(driver.last_seq)
+        assert truth is not None
+        pairs.append((f, truth))
+        if len(pairs) == n_frames:
+            break
+    await driver.close()
+    return pairs
+
+
+@pytest.mark.parametrize("protocol", ["binary", "ascii"])
+def test_scene_to_frames_matches_the_ground_truth(registry, tmp_path, protocol):
+    scene_file = tmp_path / "e2e.toml"
+    scene_file.write_text(SCENE)
+    cfg = DeviceConfig("t1", "taxel-array", {"simulate": True, "scene": str(scene_file), "rate_hz": RATE,
+                                              "rows": 8, "cols": 10, "protocol": protocol})
+    driver = registry.open_device(cfg)
+    assert driver.description.mesh.n_nodes == 80 and driver.description.family == "taxel-array"
+    pairs = asyncio.run(play(driver, int(RATE * 1.2)))
+    tolerance = driver.compliance.quantum_mm / 2 + 1e-12
+    worst = max(float(np.abs(f.displacement - truth).max()) for f, truth in pairs)
+    assert worst <= tolerance
+    depths = np.array([truth[:, 2].min() for _, truth in pairs])
+    assert depths.min() < -1.8  # the press, at full depth (its centre falls between taxels)
+    assert (depths == 0).sum() > 5  # and rest frames are rest
+    for f, _ in pairs:
+        np.testing.assert_allclose(f.pressure, -f.displacement[:, 2] / driver.compliance.mm_per_count
+                                   * driver.compliance.kpa_per_count)
+    c = driver.counters
+    assert c.frames >= len(pairs) and c.bad_crc == c.truncated == 0
+    assert c.lost <= driver.simulator.frames_dropped  # a gap only if the board overran a full pty
+    assert driver.health().state == Health.disconnected and driver.health().reason == "closed"
+
+
+def test_shear_is_lost_but_the_normal_component_is_recovered():
+    mesh = flat_pad(6, 6, pitch_mm=4.0, clamp_border=False)
+    scene = Scene.from_dict({"step": [{"kind": "slide", "at": [4.0, 10.0, 0.0], "to": [16.0, 10.0, 0.0],
+                                       "depth_mm": 1.0, "shear_mm": 0.5, "radius_mm": 8.0}]})
+    compliance = Compliance(69.0, 3.0, 0.01)
+    sim = TaxelSimulator(scene, mesh, (6, 6), compliance, rate_hz=100)
+    counts, truth = sim.frame(50)
+    assert np.abs(truth[:, :2]).max() > 0.1  # there is shear in the ground truth
+    recovered = compliance.normal_mm(counts.ravel())
+    np.testing.assert_allclose(recovered, -truth[:, 2], atol=compliance.quantum_mm / 2 + 1e-12)
+
+
+def test_compliance_round_trip_and_saturation():
+    c = Compliance(modulus_kpa=69.0, thickness_mm=3.0, kpa_per_count=0.01)
+    d = np.linspace(0, 5, 1001)
+    assert np.abs(c.normal_mm(c.counts(d)) - d).max() <= c.quantum_mm / 2 + 1e-12
+    assert c.counts(np.array([-1.0, c.full_scale_mm * 2]))[0] == 0  # a taxel cannot feel a pull
+    assert c.counts(np.array([c.full_scale_mm * 2]))[0] == 65535
+    with pytest.raises(ValueError):
+        Compliance(0.0, 3.0, 0.01)
+
+
+def test_the_driver_survives_its_board_being_unplugged(tmp_path):
+    mesh = flat_pad(4, 4, pitch_mm=4.0, clamp_border=False)
+    scene = Scene.from_dict({"scene": {"loop": True}, "step": [
+        {"kind": "press", "at": [6.0, 6.0, 0.0], "start_s": 0.0, "duration_s": 0.5, "depth_mm": 1.0}]})
+    compliance = Compliance(69.0, 3.0, 0.01)
+    sim = TaxelSimulator(scene, mesh, (4, 4), compliance, rate_hz=RATE, link=tmp_path / "ttyTAXEL")
+    driver = open_taxel_device(DeviceConfig("u", "taxel-array", {"simulate": True, "rows": 4, "cols": 4,
+                                                                 "backoff_initial_s": 0.01,
+                                                                 "backoff_cap_s": 0.05}))
+    driver = TaxelDriver(driver.description, shape=(4, 4), compliance=compliance, simulator=sim,
+                         backoff=driver._backoff)
+    states = []
+
+    async def unplug_and_replug():
+        while driver.counters.frames < 20:
+            await asyncio.sleep(0.005)
+        sim.unplug()
+        while driver.health().state != Health.disconnected:
+            await asyncio.sleep(0.005)
+        states.append(driver.health())
+        while not driver.health().reason.startswith("cannot open"):  # the path is gone: re-opens fail
+            await asyncio.sleep(0.005)
+        states.append(driver.health())
+        await asyncio.sleep(0.05)  # let the consumer drain frames read before the unplug
+        sim.replug()  # the board restarts at seq 0: its old ground truth is gone
+
+    async def main():
+        side = asyncio.create_task(unplug_and_replug())
+        pairs = await play(driver, 60)
+        await side
+        return pairs
+
+    pairs = asyncio.run(main())
+    assert states[0].reason.startswith("lost ") and states[1].reason.startswith("cannot open ")
+    assert driver.counters.reconnects == 1 and driver.counters.bad_crc == 0
+    worst = max(float(np.abs(f.displacement - truth).max()) for f, truth in pairs)
+    assert worst <= compliance.quantum_mm / 2 + 1e-12
+
+
+@pytest.mark.parametrize(("settings", "message"), [
+    ({}, "setting 'port': required setting is missing"),
+    ({"port": "/dev/ttyUSB0", "baud": 9600}, "setting 'baud': unknown setting"),
+    ({"port": "/dev/ttyUSB0", "protocol": "modbus"}, "setting 'protocol': 'modbus' is not one of"),
+    ({"port": "/dev/ttyUSB0", "rows": 255, "cols": 255}, "setting 'rows': 255 x 255 taxels do not fit"),
+    ({"simulate": True, "scene": "/no/such.toml"}, "setting 'scene': /no/such.toml"),
+])
+def test_bad_settings_name_the_field(registry, settings, message):
+    with pytest.raises(DriverError) as e:
+        registry.open_device(DeviceConfig("t", "taxel-array", settings))
+    assert str(e.value).startswith(f"device 't' (family 'taxel-array'): {message}")
+
+
+def test_the_demo_device_opens_and_streams(registry):
+    (cfg,) = registry.demo_devices()
+    driver = registry.open_device(cfg)
+    assert driver.description.mesh.n_nodes == 256 and driver.simulator is not None
+    pairs = asyncio.run(play(driver, 5))
+    assert len(pairs) == 5

@@ -1,0 +1,94 @@
+"""``wott-hub replay``: re-emit a recorded range as live events of a replay Thing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._db import resolve_database
+
+app = typer.Typer()
+
+
+@app.command()
+def replay(
+    device: str = typer.Option(..., "--device", help="Recorded device id (see `wott-hub history list`)."),
+    t_from: str = typer.Option(None, "--from", help="Start: ISO 8601 (local unless Z), -10m, seconds."),
+    t_to: str = typer.Option(None, "--to", help="End, same forms as --from."),
+    speed: float = typer.Option(1.0, help="Time scale: 2 plays twice as fast; 0 as fast as possible."),
+    loop: bool = typer.Option(False, "--loop", help="Start again after the end, until Ctrl-C."),
+    delay: float = typer.Option(1.0, help="Seconds to wait before the first event (time to subscribe)."),
+    linger: float = typer.Option(1.0, help="Seconds to keep serving after the last event."),
+    host: str = typer.Option("127.0.0.1", help="Address to listen on."),
+    port: int = typer.Option(8090, "--port", help="HTTP port of the replay server; 0 = any free port."),
+    ws_port: int = typer.Option(8091, "--ws-port", help="WebSocket port (wotpy JSON-RPC); 0 = any free."),
+    database: str = typer.Option(None, "--database", "-d", help="Database file or URL."),
+    config: Path = typer.Option(None, "--config", "-c", exists=True, dir_okay=False,
+                                help="Hub config naming the database."),
+    as_json: bool = typer.Option(False, "--json", help="Print the replay Thing's URLs as one JSON line."),
+) -> None:
+    """Serve a replay Thing ``replay-DEVICE`` (the device's TD) and re-emit its recorded events.
+
+    Subscribers get the recorded payloads unchanged, in order, at the original
+    pace divided by --speed, over SSE and WebSocket like a live device.
+    """
+    import asyncio
+    import json
+    import signal
+
+    from wott_hub.config import HubConfig
+    from wott_hub.drivers.base import DriverError
+    from wott_hub.history import parse_time
+    from wott_hub.hub import Hub
+
+    try:
+        lo = parse_time(t_from) if t_from else None
+        hi = parse_time(t_to) if t_to else None
+    except ValueError as e:
+        typer.echo(f"error: {e}", err=True)
+        raise typer.Exit(2) from None
+    if speed < 0:
+        typer.echo("error: --speed must be >= 0", err=True)
+        raise typer.Exit(2)
+    db = resolve_database(database, config)
+    cfg = HubConfig(name=f"replay of {device}", host=host, http_port=port, ws_port=ws_port, database=db)
+
+    async def main() -> int:
+        hub = Hub(cfg)
+        stop = asyncio.Event()
+        loop_ = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop_.add_signal_handler(sig, stop.set)
+        await hub.start()
+        try:
+            rt = await hub.add_replay(device, t_from_ns=lo, t_to_ns=hi, speed=speed, loop=loop)
+        except DriverError as e:
+            await hub.stop()
+            typer.echo(f"error: {e}", err=True)
+            return 1
+        url = hub.td_url(rt.id)
+        if as_json:
+            typer.echo(json.dumps({"thing": rt.id, "td": url, "events": f"{url}/events",
+                                   "websocket": hub.ws_url, "speed": speed, "loop": loop}))
+        else:
+            typer.echo(f"replaying {device!r} as {rt.id!r} at {speed:g}x{' (loop)' if loop else ''}")
+            typer.echo(f"  TD   {url}")
+            typer.echo(f"  SSE  {url}/events")
+        try:
+            await asyncio.wait_for(stop.wait(), delay)
+        except TimeoutError:
+            task = hub.start_replay(rt)
+            waiter = asyncio.ensure_future(stop.wait())
+            await asyncio.wait({task, waiter}, return_when=asyncio.FIRST_COMPLETED)
+            if task.done() and not stop.is_set():
+                typer.echo(f"replayed {rt.replayer.emitted} records", err=True)
+                try:
+                    await asyncio.wait_for(stop.wait(), linger)
+                except TimeoutError:
+                    pass
+            waiter.cancel()
+        await hub.stop()
+        return 0
+
+    raise typer.Exit(asyncio.run(main()))

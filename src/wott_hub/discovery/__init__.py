@@ -1,0 +1,23 @@
+"""mDNS/DNS-SD announcement and browsing of WoT Things and directories, and consumption of what is found.
+
+Hub wiring, in short::
+
+    zc = AsyncZeroconf()                               # or loopback_zeroconf() for a local demo
+    announcer = Announcer(zc)
+    await announcer.announce_directory("wott-hub", port)             # TD at /.well-known/wot
+    await announcer.announce_thing("barrel-1", port, "/things/barrel-1")
+    explorer = Explorer(on_found=..., on_updated=..., on_lost=..., own_ids=hub_thing_ids)
+    browser = Browser(zc, explorer.service_added, explorer.service_updated, explorer.service_removed,
+                      ignore=lambda name: name in announcer.names)
+    await browser.start()
+"""
+
+from .announcer import Announcer, default_addresses, loopback_zeroconf
+from .browser import Browser
+from .explorer import Explorer, FoundThing, registry_claim, td_kind
+from .records import DIRECTORY_SUBTYPE, WOT_TCP, ServiceRecord, instance_name, txt_record
+
+__all__ = [
+    "DIRECTORY_SUBTYPE", "WOT_TCP", "Announcer", "Browser", "Explorer", "FoundThing", "ServiceRecord",
+    "default_addresses", "instance_name", "loopback_zeroconf", "registry_claim", "td_kind", "txt_record",
+]

@@ -1,0 +1,57 @@
+"""One entry of the event plane: an event or a property change of one Thing.
+
+The payload is JSON-encoded once, when the record is made; history stores that
+text, SSE and WebSocket subscribers send it as is. The SSE frame is built the
+first time an SSE subscriber needs it and then shared by all of them.
+"""
+
+from __future__ import annotations
+
+import json
+
+__all__ = ["KIND_EVENT", "KIND_PROPERTY", "Record", "encode"]
+
+KIND_EVENT = 0
+KIND_PROPERTY = 1
+
+_encoder = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, check_circular=False)
+encode = _encoder.encode
+"""Compact JSON text of a payload (the one encoding every consumer shares)."""
+
+
+class Record:
+    """``seq`` is per Thing, strictly increasing, never reused (see EventPlane).
+
+    ``trace`` is None unless latency tracing is on (benchmarks): then it holds
+    perf_counter_ns stamps of the pipeline stages.
+    """
+
+    __slots__ = ("_sse", "data", "kind", "name", "seq", "t_ns", "thing", "trace")
+
+    def __init__(self, thing: str, seq: int, kind: int, name: str, t_ns: int, data: str,
+                 trace: dict[str, int] | None = None) -> None:
+        self.thing = thing
+        self.seq = seq
+        self.kind = kind
+        self.name = name
+        self.t_ns = t_ns
+        self.data = data
+        self.trace = trace
+        self._sse: bytes | None = None
+
+    def sse(self) -> bytes:
+        """The Server-Sent Events frame: ``id`` is the sequence number (resume key)."""
+        frame = self._sse
+        if frame is None:
+            # JSON text has no raw newlines (json escapes them), so one data line is enough
+            frame = self._sse = f"id: {self.seq}\nevent: {self.name}\ndata: {self.data}\n\n".encode()
+        return frame
+
+    def to_dict(self) -> dict:
+        """The export/JSON Lines form of the record."""
+        return {"thing": self.thing, "seq": self.seq, "t_ns": self.t_ns,
+                "kind": "property" if self.kind == KIND_PROPERTY else "event",
+                "name": self.name, "data": json.loads(self.data)}
+
+    def __repr__(self) -> str:
+        return f"Record({self.thing!r}, seq={self.seq}, {self.name!r}, t_ns={self.t_ns})"

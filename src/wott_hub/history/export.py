@@ -1,0 +1,30 @@
+"""Export a range of history as JSON Lines, one record per line.
+
+Each line is ``{"thing", "seq", "t_ns", "kind", "name", "data"}``; ``data`` is
+the payload exactly as subscribers received it (spliced in as stored, not
+decoded and re-encoded).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import TextIO
+
+from .reader import HistoryReader
+
+__all__ = ["export_jsonl"]
+
+_KINDS = {0: "event", 1: "property"}
+
+
+def export_jsonl(reader: HistoryReader, out: TextIO, thing: str, *, t_from_ns: int | None = None,
+                 t_to_ns: int | None = None, names: list[str] | None = None) -> int:
+    """Write the records of ``thing`` in [t_from, t_to] to ``out``; returns how many."""
+    head = '{"thing":' + json.dumps(thing) + ',"seq":'
+    n = 0
+    for page in reader.pages(thing, t_from_ns, t_to_ns, names):
+        out.write("".join(
+            f'{head}{seq},"t_ns":{t},"kind":"{_KINDS.get(k, k)}","name":{json.dumps(name)},"data":{data}}}\n'
+            for seq, t, k, name, data in page))
+        n += len(page)
+    return n

@@ -1,0 +1,157 @@
+"""Read history: what is recorded, ranges in sequence order, resume backlogs.
+
+A Thing's records are read in pages by primary key (thing, seq) ranges,
+which on SQLite is the table's own clustered order (sequential reads); a time
+range is first turned into a seq range through ``ix_events_thing_time``.
+Within a Thing, time order is seq order: the processor rejects frames that go
+back in time. Pages are separate short transactions, so a long replay never
+holds a read snapshot open (SQLite could not checkpoint its WAL meanwhile).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import sqlalchemy as sa
+from sqlalchemy.engine import Engine
+
+from wott_hub.events.record import Record
+
+from .models import EventRow, ThingRow
+
+__all__ = ["HistoryReader", "ThingSummary"]
+
+_E = EventRow.__table__
+_T = ThingRow.__table__
+
+
+@dataclass(frozen=True)
+class ThingSummary:
+    id: str
+    title: str
+    family: str
+    count: int
+    first_seq: int | None
+    last_seq: int | None
+    first_t_ns: int | None
+    last_t_ns: int | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+class HistoryReader:
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+        self._keys: dict[str, int] = {}
+
+    def key(self, thing: str) -> int | None:
+        key = self._keys.get(thing)
+        if key is None:
+            with self.engine.connect() as conn:
+                key = conn.execute(sa.select(_T.c.key).where(_T.c.id == thing)).scalar()
+            if key is not None:
+                self._keys[thing] = key
+        return key
+
+    # --- what is recorded -----------------------------------------------------------
+
+    def things(self) -> list[ThingSummary]:
+        out = []
+        with self.engine.connect() as conn:
+            rows = conn.execute(sa.select(_T.c.key, _T.c.id, _T.c.title, _T.c.family).order_by(_T.c.id)).all()
+            for key, tid, title, family in rows:
+                count, s0, s1 = conn.execute(
+                    sa.select(sa.func.count(), sa.func.min(_E.c.seq), sa.func.max(_E.c.seq))
+                    .where(_E.c.thing_key == key)).one()
+                t0 = t1 = None
+                if count:
+                    t0 = conn.execute(sa.select(_E.c.t_ns).where(_E.c.thing_key == key)
+                                      .order_by(_E.c.t_ns).limit(1)).scalar()
+                    t1 = conn.execute(sa.select(_E.c.t_ns).where(_E.c.thing_key == key)
+                                      .order_by(_E.c.t_ns.desc()).limit(1)).scalar()
+                out.append(ThingSummary(tid, title, family, count, s0, s1, t0, t1))
+        return out
+
+    def thing_info(self, thing: str) -> dict[str, Any] | None:
+        """Title, family, TD and static property values recorded for ``thing``."""
+        with self.engine.connect() as conn:
+            row = conn.execute(sa.select(_T.c.title, _T.c.family, _T.c.td, _T.c.static_values)
+                               .where(_T.c.id == thing)).first()
+        if row is None:
+            return None
+        title, family, td, static = row
+        return {"id": thing, "title": title, "family": family,
+                "td": json.loads(td) if td else None, "static_values": json.loads(static) if static else {}}
+
+    # --- resume backlog (the event plane's HistorySource) ---------------------------
+
+    def rows(self, thing: str, after: int, upto: int, interest: tuple[int, str | None],
+             limit: int) -> tuple[list[Record], int]:
+        key = self.key(thing)
+        if key is None:
+            return [], upto
+        kind, name = interest
+        q = (sa.select(_E.c.seq, _E.c.t_ns, _E.c.kind, _E.c.name, _E.c.data)
+             .where(_E.c.thing_key == key, _E.c.seq > after, _E.c.seq <= upto)
+             .order_by(_E.c.seq).limit(limit))
+        with self.engine.connect() as conn:
+            rows = conn.execute(q).all()
+        reached = rows[-1][0] if len(rows) == limit else upto
+        recs = [Record(thing, s, k, n, t, d) for s, t, k, n, d in rows
+                if k == kind and (name is None or n == name)]
+        return recs, reached
+
+    async def fetch(self, thing: str, after: int, upto: int, interest: tuple[int, str | None],
+                    limit: int) -> tuple[list[Record], int]:
+        return await asyncio.to_thread(self.rows, thing, after, upto, interest, limit)
+
+    # --- ranges (export, replay) ----------------------------------------------------
+
+    def seq_range(self, thing: str, t_from_ns: int | None = None,
+                  t_to_ns: int | None = None) -> tuple[int, int] | None:
+        """First and last seq of ``thing`` within [t_from, t_to]; None if nothing is there."""
+        key = self.key(thing)
+        if key is None:
+            return None
+        with self.engine.connect() as conn:
+            q0 = sa.select(_E.c.seq).where(_E.c.thing_key == key)
+            q1 = q0
+            if t_from_ns is not None:
+                q0 = q0.where(_E.c.t_ns >= t_from_ns)
+            if t_to_ns is not None:
+                q1 = q1.where(_E.c.t_ns <= t_to_ns)
+            lo = conn.execute(q0.order_by(_E.c.t_ns, _E.c.seq).limit(1)).scalar()
+            hi = conn.execute(q1.order_by(_E.c.t_ns.desc(), _E.c.seq.desc()).limit(1)).scalar()
+        if lo is None or hi is None or lo > hi:
+            return None
+        return lo, hi
+
+    def pages(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
+              names: list[str] | None = None, page: int = 20_000) -> Iterator[list[tuple]]:
+        """Pages of (seq, t_ns, kind, name, data) in seq (= time) order."""
+        bounds = self.seq_range(thing, t_from_ns, t_to_ns)
+        if bounds is None:
+            return
+        key = self.key(thing)
+        lo, hi = bounds
+        cursor = lo - 1
+        while cursor < hi:
+            q = (sa.select(_E.c.seq, _E.c.t_ns, _E.c.kind, _E.c.name, _E.c.data)
+                 .where(_E.c.thing_key == key, _E.c.seq > cursor, _E.c.seq <= hi)
+                 .order_by(_E.c.seq).limit(page))
+            with self.engine.connect() as conn:
+                rows = conn.execute(q).all()
+            if not rows:
+                return
+            cursor = rows[-1][0]
+            if t_from_ns is not None or t_to_ns is not None or names:
+                lo_t = t_from_ns if t_from_ns is not None else -1
+                hi_t = t_to_ns if t_to_ns is not None else 1 << 63
+                rows = [r for r in rows if lo_t <= r[1] <= hi_t and (not names or r[3] in names)]
+            if rows:
+                yield rows

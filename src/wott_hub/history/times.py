@@ -1,0 +1,44 @@
+"""Times on the command line: ISO 8601, relative (``-10m``), or a number since the epoch."""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+import time
+
+__all__ = ["format_ns", "parse_time"]
+
+_REL = re.compile(r"^-(\d+(?:\.\d+)?)\s*(ms|s|m|h|d)$")
+_UNIT = {"ms": 1e-3, "s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def parse_time(text: str, now_ns: int | None = None) -> int:
+    """Nanoseconds since the epoch from ``2026-11-22T10:00:00`` (local time unless it has an
+    offset or ``Z``), ``-10m`` / ``-2h`` / ``-500ms`` (before now), ``now``, or a number
+    (seconds, or nanoseconds when it is larger than 1e14)."""
+    s = text.strip()
+    now_ns = now_ns if now_ns is not None else time.time_ns()
+    if s == "now":
+        return now_ns
+    m = _REL.match(s)
+    if m:
+        return now_ns - int(float(m.group(1)) * _UNIT[m.group(2)] * 1e9)
+    try:
+        number = float(s)
+    except ValueError:
+        pass
+    else:
+        return int(number) if number > 1e14 else int(number * 1e9)
+    try:
+        when = dt.datetime.fromisoformat(s.replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"not a time: {text!r} (ISO 8601, -10m, now, or seconds since the epoch)") from None
+    if when.tzinfo is None:
+        when = when.astimezone()  # local time
+    return int(when.timestamp() * 1e9)
+
+
+def format_ns(t_ns: int | None) -> str:
+    if t_ns is None:
+        return "-"
+    return dt.datetime.fromtimestamp(t_ns / 1e9).astimezone().isoformat(timespec="milliseconds")

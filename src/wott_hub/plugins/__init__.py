@@ -1,0 +1,16 @@
+"""The driver plugin system (pluggy, modelled on datasette's): see docs/plugins.md.
+
+Plugins are modules registered under the ``wott_hub.drivers`` entry-point
+group; they implement the hooks of ``hookspecs`` with ``@hookimpl``. The hub
+talks to them only through the ``Registry``.
+"""
+
+from .hookspecs import hookimpl, hookspec
+from .loader import ENTRY_POINT_GROUP, ENV_VAR
+from .model import DeviceConfig, FamilyInfo, PluginInfo
+from .registry import Registry, get_registry, reset_registry
+
+__all__ = [
+    "ENTRY_POINT_GROUP", "ENV_VAR", "DeviceConfig", "FamilyInfo", "PluginInfo", "Registry",
+    "get_registry", "hookimpl", "hookspec", "reset_registry",
+]

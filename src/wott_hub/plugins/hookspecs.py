@@ -1,0 +1,92 @@
+"""The hooks a wott-hub driver plugin can implement (documented for users in docs/plugins.md).
+
+A plugin is a module registered under the ``wott_hub.drivers`` entry-point
+group; it implements any subset of these hooks with functions of the same name
+decorated with ``wott_hub.plugins.hookimpl``. An implementation may accept
+fewer arguments than the spec lists (pluggy passes only those it names).
+
+Every call is isolated per plugin: if one plugin's implementation raises, the
+registry records the error against that plugin (``wott-hub plugins list``
+shows it) and carries on with the other plugins' results.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import pluggy
+
+if TYPE_CHECKING:
+    from wott_hub.drivers.base import Driver
+
+    from .model import DeviceConfig, FamilyInfo
+
+__all__ = ["PROJECT", "hookimpl", "hookspec"]
+
+PROJECT = "wott_hub"
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+@hookspec
+def wott_hub_families() -> list[FamilyInfo]:
+    """The device families this plugin provides.
+
+    Called once, when the registry loads the plugins (at hub start-up and by
+    ``wott-hub plugins list``). Return a list of ``FamilyInfo(name,
+    description, schema)``: ``name`` is what a device's ``family`` key refers
+    to (unique across all plugins; a later plugin claiming a taken name gets an
+    error), ``schema`` a JSON Schema (draft 2020-12) of the device's settings.
+    Keep it cheap: import no camera or model libraries here.
+    """
+
+
+@hookspec(firstresult=True)
+def wott_hub_open_device(config: DeviceConfig) -> Driver | None:
+    """Open one device of a family this plugin provides.
+
+    Called by ``Registry.open_device`` for the plugin that provides
+    ``config.family`` only, after ``config.settings`` has been validated
+    against the family's schema and completed with the schema's top-level
+    defaults. Return a ``Driver`` (not yet started: it starts when the hub
+    iterates ``frames()``), or None if the family is not this plugin's. Raise
+    ``DriverError`` with a message naming the setting at fault when the device
+    cannot be opened with these settings. Do not block here: the transport is
+    opened and kept alive inside the driver.
+    """
+
+
+@hookspec
+def wott_hub_demo_devices() -> list[DeviceConfig]:
+    """The simulated devices this plugin contributes to the demo scene.
+
+    Called by ``wott-hub run`` when it is given no config. Return a list of
+    ``DeviceConfig`` (each with a unique ``id`` and one of this plugin's
+    families) that open without hardware, e.g. a simulator playing a scene
+    shipped with the plugin; return an empty list to contribute none.
+    """
+
+
+@hookspec(firstresult=True)
+def wott_hub_claim_service(service: dict[str, Any]) -> DeviceConfig | None:
+    """Take over a device found by mDNS/DNS-SD.
+
+    Called by ``Registry.claim`` for each service the hub's discovery browser
+    finds, plugin by plugin until one claims it. ``service`` is a plain dict:
+    ``name``, ``type`` (e.g. ``_wot._tcp.local.``), ``server``, ``addresses``
+    (list of str), ``port`` (int) and ``properties`` (TXT record, str -> str).
+    Return a ``DeviceConfig`` that opens the device through one of this
+    plugin's families, or None to leave the service to other plugins.
+    """
+
+
+@hookspec(firstresult=True)
+def wott_hub_claim_td(td: dict[str, Any]) -> DeviceConfig | None:
+    """Adopt a foreign Thing Description (a network device that speaks WoT itself).
+
+    Called by ``Registry.claim`` with a TD found in a directory or fetched
+    from a discovered Thing (a dict parsed from JSON, never modified by the
+    hub), plugin by plugin until one claims it. Return a ``DeviceConfig`` whose
+    driver consumes that Thing and yields ``TactileFrame``s, so the hub
+    re-exposes it with a Tactile TD; or None if this plugin cannot adapt it.
+    """

@@ -1,0 +1,409 @@
+"""The registry: the loaded plugins, the families they provide, and devices opened through them.
+
+Each hook is called with pluggy, but one plugin at a time (a subset hook
+caller holding only that plugin), in pluggy's own call order. A plugin whose
+hook raises, or returns something that is not what the hook promises, gets
+the error recorded against it and is skipped for that call; the other
+plugins' results stand. One plugin cannot take down the hub.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import pluggy
+
+from wott_hub.drivers.base import Driver, DriverError
+
+from . import hookspecs
+from .loader import ENTRY_POINT_GROUP, describe_exception, discover, selected_names
+from .model import DeviceConfig, FamilyInfo, PluginInfo
+
+__all__ = ["BUILTIN_PLUGINS", "Registry", "get_registry", "reset_registry"]
+
+# Plugins inside the core package (like datasette's default plugins): always loaded.
+BUILTIN_PLUGINS = {"builtin": "wott_hub.plugins.builtin"}
+
+_FROM_ENV: Any = object()
+_MAX_ERRORS_PER_HOOK = 5
+
+
+@dataclass
+class _Record:
+    name: str
+    distribution: str | None
+    version: str | None
+    plugin: Any = None
+    families: list[str] = field(default_factory=list)
+    errors: dict[str, list[str]] = field(default_factory=dict)  # "load" / "register" / hook -> messages
+
+
+class Registry:
+    """The plugins of one hub. Build it with ``get_registry()`` unless a test needs its own.
+
+    ``only`` limits the entry-point plugins imported (names as in
+    ``WOTT_HUB_PLUGINS``, which is read when ``only`` is not given); the
+    built-in plugins are always registered.
+    """
+
+    def __init__(
+        self,
+        *,
+        only: Iterable[str] | None = _FROM_ENV,
+        entry_points: bool = True,
+        builtins: bool = True,
+        group: str = ENTRY_POINT_GROUP,
+    ) -> None:
+        self.pm = pluggy.PluginManager(hookspecs.PROJECT)
+        self.pm.add_hookspecs(hookspecs)
+        self._records: dict[str, _Record] = {}
+        self._lock = threading.RLock()
+        self._callers: dict[tuple[str, str], Any] = {}
+        self._families: dict[str, FamilyInfo] | None = None
+        self._validators: dict[str, Any] = {}
+        if builtins:
+            import importlib
+
+            for name, module_name in BUILTIN_PLUGINS.items():
+                self.register(importlib.import_module(module_name), name, "wott-hub", _core_version())
+        if entry_points:
+            wanted = selected_names() if only is _FROM_ENV else only
+            for cand in discover(group, wanted):
+                if cand.error is not None:
+                    self._records[cand.name] = _Record(cand.name, cand.distribution, cand.version,
+                                                       errors={"load": [cand.error]})
+                else:
+                    self.register(cand.module, cand.name, cand.distribution, cand.version)
+
+    # -- loading -------------------------------------------------------------
+    def register(
+        self, plugin: Any, name: str, distribution: str | None = None, version: str | None = None
+    ) -> PluginInfo:
+        """Register a plugin object (usually a module); failures are recorded, never raised."""
+        with self._lock:
+            if name in self._records:
+                other = self._records[name]
+                self._records[f"{name} ({distribution})"] = _Record(
+                    name, distribution, version,
+                    errors={"register": [f"plugin name {name!r} is already taken by {other.distribution}"]},
+                )
+                return self._info(self._records[f"{name} ({distribution})"])
+            rec = self._records[name] = _Record(name, distribution, version)
+            try:
+                self.pm.register(plugin, name=name)
+            except Exception as e:
+                rec.errors["register"] = [describe_exception(e)]
+                if self.pm.has_plugin(name):  # a bad hook signature can leave half a registration
+                    self.pm.unregister(name=name)
+                return self._info(rec)
+            rec.plugin = plugin
+            for caller in self.pm.get_hookcallers(plugin) or []:
+                if not caller.has_spec():
+                    rec.errors[caller.name] = ["not a wott-hub hook (misspelt?); never called"]
+            self._callers.clear()
+            self._families = None
+            return self._info(rec)
+
+    # -- calling hooks, one plugin at a time -----------------------------------
+    def _record_error(self, plugin: str, hook: str, message: str) -> None:
+        """Keep each distinct message once (a hook failing on every call must not grow memory)."""
+        with self._lock:
+            messages = self._records[plugin].errors.setdefault(hook, [])
+            if message not in messages:
+                messages.append(message)
+                del messages[:-_MAX_ERRORS_PER_HOOK]
+
+    def _caller(self, hook: str, plugin: Any, name: str) -> Any:
+        key = (hook, name)
+        caller = self._callers.get(key)
+        if caller is None:
+            others = [p for p in self.pm.get_plugins() if p is not plugin]
+            caller = self._callers[key] = self.pm.subset_hook_caller(hook, remove_plugins=others)
+        return caller
+
+    def _call_each(self, hook: str, copy_args: bool = False, **kwargs: Any) -> Iterator[tuple[str, Any]]:
+        """Yield (plugin name, what its implementation returned), skipping and recording failures.
+
+        ``copy_args`` gives each plugin its own deep copy of the arguments, so one
+        plugin mutating a dict cannot change what the next one sees.
+        """
+        hook_caller = getattr(self.pm.hook, hook)
+        firstresult = bool(hook_caller.spec and hook_caller.spec.opts.get("firstresult"))
+        done: list[Any] = []
+        for impl in reversed(hook_caller.get_hookimpls()):
+            if any(impl.plugin is p for p in done):
+                continue
+            done.append(impl.plugin)
+            name = impl.plugin_name
+            try:
+                args = copy.deepcopy(kwargs) if copy_args else kwargs
+                out = self._caller(hook, impl.plugin, name)(**args)
+            except Exception as e:
+                self._record_error(name, hook, f"raised {describe_exception(e)}")
+                continue
+            if firstresult:
+                yield name, out
+            else:
+                for value in out:
+                    yield name, value
+
+    # -- families ------------------------------------------------------------
+    def families(self) -> dict[str, FamilyInfo]:
+        """Every family a loaded plugin provides, by name."""
+        with self._lock:
+            if self._families is None:
+                self._families = self._collect_families()
+            return dict(self._families)
+
+    def _collect_families(self) -> dict[str, FamilyInfo]:
+        from jsonschema import Draft202012Validator
+        from jsonschema.exceptions import SchemaError
+
+        hook = "wott_hub_families"
+        found: dict[str, FamilyInfo] = {}
+        for rec in self._records.values():
+            rec.families = []
+            rec.errors.pop(hook, None)  # asked afresh: old answers no longer apply
+        answers: dict[str, list[Any]] = {}
+        for name, result in self._call_each(hook):
+            answers.setdefault(name, []).append(result)
+        # On a name clash the plugin registered first keeps the family (built-ins, then entry
+        # points by name), whatever order pluggy calls them in: stable across runs and installs.
+        for name in [n for n in self._records if n in answers]:
+            for result in answers[name]:
+                self._accept_families(name, result, found, Draft202012Validator, SchemaError)
+        self._validators.clear()
+        return found
+
+    def _accept_families(self, name: str, result: Any, found: dict[str, FamilyInfo],
+                         validator_cls: Any, schema_error: type[Exception]) -> None:
+        hook = "wott_hub_families"
+        if not isinstance(result, list | tuple):
+            self._record_error(name, hook, f"returned {type(result).__name__}, not a list of FamilyInfo")
+            return
+        for fam in result:
+            if not isinstance(fam, FamilyInfo):
+                self._record_error(name, hook, f"returned a {type(fam).__name__}, not a FamilyInfo")
+                continue
+            try:
+                validator_cls.check_schema(fam.schema)
+            except schema_error as e:
+                self._record_error(name, hook, f"family {fam.name!r}: invalid settings schema: {e.message}")
+                continue
+            if fam.name in found:
+                self._record_error(name, hook, f"family {fam.name!r} is already provided by plugin "
+                                               f"{found[fam.name].plugin!r}")
+                continue
+            found[fam.name] = replace(fam, plugin=name)
+            self._records[name].families.append(fam.name)
+
+    # -- devices -------------------------------------------------------------
+    def validate(self, cfg: DeviceConfig) -> DeviceConfig:
+        """``cfg`` with its settings checked against the family's schema and defaults filled in."""
+        families = self.families()
+        info = families.get(cfg.family)
+        if info is None:
+            known = ", ".join(sorted(families)) or "none"
+            raise DriverError(f"device {cfg.id!r}: unknown family {cfg.family!r} "
+                              f"(installed families: {known})")
+        validator = self._validators.get(cfg.family)
+        if validator is None:
+            from jsonschema import Draft202012Validator
+
+            validator = self._validators[cfg.family] = Draft202012Validator(info.schema)
+        from jsonschema.exceptions import best_match
+
+        error = best_match(validator.iter_errors(cfg.settings))
+        if error is not None:
+            raise DriverError(_explain(cfg, error))
+        settings = dict(cfg.settings)
+        for key, prop in (info.schema.get("properties") or {}).items():
+            if key not in settings and isinstance(prop, Mapping) and "default" in prop:
+                settings[key] = copy.deepcopy(prop["default"])
+        return replace(cfg, settings=settings)
+
+    def open_device(self, cfg: DeviceConfig) -> Driver:
+        """Open ``cfg`` through the plugin of its family; DriverError names the setting at fault.
+
+        A DriverError from the plugin is the device's problem and passes through;
+        any other exception is the plugin's bug: recorded against it, then
+        reported as a DriverError for this device.
+        """
+        cfg = self.validate(cfg)
+        plugin = self.families()[cfg.family].plugin
+        hook = "wott_hub_open_device"
+        rec = self._records[plugin]
+        if not any(impl.plugin is rec.plugin for impl in getattr(self.pm.hook, hook).get_hookimpls()):
+            raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} provides family {cfg.family!r} "
+                              f"but does not implement {hook}")
+        try:
+            driver = self._caller(hook, rec.plugin, plugin)(config=cfg)
+        except DriverError:
+            raise
+        except Exception as e:
+            msg = f"raised {describe_exception(e)}"
+            self._record_error(plugin, hook, msg)
+            raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} {msg}") from e
+        if not isinstance(driver, Driver):
+            msg = f"returned {type(driver).__name__} for device {cfg.id!r}, not a Driver"
+            self._record_error(plugin, hook, msg)
+            raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} {msg}")
+        return driver
+
+    def demo_devices(self) -> list[DeviceConfig]:
+        """Each plugin's simulated demo devices, for ``wott-hub run`` without a config."""
+        hook = "wott_hub_demo_devices"
+        families = self.families()
+        out: list[DeviceConfig] = []
+        ids: set[str] = set()
+        for name, result in self._call_each(hook):
+            if not isinstance(result, list | tuple):
+                self._record_error(name, hook,
+                                   f"returned {type(result).__name__}, not a list of DeviceConfig")
+                continue
+            for cfg in result:
+                if not isinstance(cfg, DeviceConfig):
+                    self._record_error(name, hook, f"returned a {type(cfg).__name__}, not a DeviceConfig")
+                elif cfg.family not in families or families[cfg.family].plugin != name:
+                    self._record_error(name, hook, f"demo device {cfg.id!r} names family {cfg.family!r}, "
+                                                   "which this plugin does not provide")
+                elif cfg.id in ids:
+                    self._record_error(name, hook, f"demo device id {cfg.id!r} is already taken")
+                else:
+                    ids.add(cfg.id)
+                    out.append(cfg)
+        return out
+
+    def claim(self, service_or_td: Any) -> DeviceConfig | None:
+        """The device config of the first plugin that claims a discovered service or foreign TD.
+
+        ``service_or_td`` is a TD (a mapping with ``@context``), an mDNS service
+        as a mapping, or a zeroconf ``ServiceInfo``.
+        """
+        kind, payload = _classify(service_or_td)
+        hook, arg = ("wott_hub_claim_td", "td") if kind == "td" else ("wott_hub_claim_service", "service")
+        families = self.families()
+        for name, result in self._call_each(hook, copy_args=True, **{arg: payload}):
+            if result is None:
+                continue
+            if not isinstance(result, DeviceConfig):
+                self._record_error(name, hook, f"returned {type(result).__name__}, not a DeviceConfig")
+            elif result.family not in families:
+                self._record_error(name, hook, f"claimed a device for unknown family {result.family!r}")
+            else:
+                return result
+        return None
+
+    # -- reporting -----------------------------------------------------------
+    def plugins(self) -> list[PluginInfo]:
+        """Every plugin seen: loaded ones with their families and hooks, failed ones with their error."""
+        self.families()  # a plugin's families (and errors in providing them) are part of its report
+        with self._lock:
+            return [self._info(rec) for rec in self._records.values()]
+
+    def _info(self, rec: _Record) -> PluginInfo:
+        hooks: tuple[str, ...] = ()
+        if rec.plugin is not None and self.pm.is_registered(rec.plugin):
+            hooks = tuple(sorted(c.name for c in self.pm.get_hookcallers(rec.plugin) or []))
+        error = "; ".join(
+            msg if key in ("load", "register") else f"{key}: {msg}"
+            for key, messages in rec.errors.items() for msg in messages
+        )
+        return PluginInfo(rec.name, rec.distribution, rec.version, tuple(rec.families), hooks, error or None)
+
+
+def _explain(cfg: DeviceConfig, error: Any) -> str:
+    """A one-line validation message that names the setting at fault."""
+    path = [str(p) for p in error.absolute_path]
+    instance = error.instance
+    message = error.message
+    if error.validator == "required" and isinstance(instance, Mapping):
+        missing = [k for k in error.validator_value if k not in instance]
+        path += missing[:1]
+        message = "required setting is missing"
+    elif error.validator == "additionalProperties" and isinstance(instance, Mapping):
+        allowed = sorted((error.schema.get("properties") or {}).keys())
+        extra = [k for k in instance if k not in allowed]
+        path += [str(k) for k in extra[:1]]
+        message = "unknown setting" + (f" (allowed: {', '.join(allowed)})" if allowed else "")
+    elif error.validator in ("oneOf", "anyOf") and isinstance(instance, Mapping):
+        # Schemas say "one of these settings" as alternatives that each require one key.
+        names = [b["required"][0] for b in error.validator_value
+                 if isinstance(b, Mapping) and len(b.get("required") or ()) == 1]
+        if names and len(names) == len(error.validator_value):
+            given = [n for n in names if n in instance]
+            listed = " or ".join(repr(n) for n in names)
+            message = f"give only one of {listed}" if given else f"needs one of {listed}"
+            path += given[:1] or names[:1]
+    where = f"setting {'.'.join(path)!r}" if path else "settings"
+    return f"device {cfg.id!r} (family {cfg.family!r}): {where}: {message}"
+
+
+def _classify(obj: Any) -> tuple[str, dict[str, Any]]:
+    if isinstance(obj, Mapping):
+        if "@context" in obj or "securityDefinitions" in obj:
+            return "td", dict(obj)
+        return "service", _service_dict(obj)
+    if hasattr(obj, "port") and hasattr(obj, "properties") and hasattr(obj, "type"):
+        addresses = obj.parsed_addresses() if hasattr(obj, "parsed_addresses") else []
+        return "service", _service_dict({
+            "name": obj.name, "type": obj.type, "server": getattr(obj, "server", None),
+            "addresses": addresses, "port": obj.port, "properties": obj.properties,
+        })
+    raise TypeError(f"cannot claim a {type(obj).__name__}: expected a TD, a service dict or a ServiceInfo")
+
+
+def _text(v: Any) -> str:
+    if isinstance(v, bytes | bytearray):
+        return bytes(v).decode("utf-8", errors="replace")
+    return "" if v is None else str(v)
+
+
+_SERVICE_KEYS = ("name", "type", "server", "addresses", "port", "properties")
+
+
+def _service_dict(raw: Mapping[str, Any]) -> dict[str, Any]:
+    """mDNS services as plugins see them: plain str/int/list values, TXT decoded."""
+    props = raw.get("properties") or {}
+    return {
+        **{k: v for k, v in raw.items() if k not in _SERVICE_KEYS},
+        "name": _text(raw.get("name")),
+        "type": _text(raw.get("type")),
+        "server": _text(raw.get("server")) or None,
+        "addresses": [_text(a) for a in raw.get("addresses") or []],
+        "port": int(raw["port"]) if raw.get("port") is not None else None,
+        "properties": {_text(k): _text(v) for k, v in dict(props).items()},
+    }
+
+
+def _core_version() -> str | None:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("wott-hub")
+    except PackageNotFoundError:
+        return None
+
+
+_registry: Registry | None = None
+_registry_lock = threading.Lock()
+
+
+def get_registry() -> Registry:
+    """The process's registry, loaded on first use (plugins are imported once)."""
+    global _registry
+    with _registry_lock:
+        if _registry is None:
+            _registry = Registry()
+        return _registry
+
+
+def reset_registry() -> None:
+    """Forget the cached registry (tests, or after installing a plugin in a running process)."""
+    global _registry
+    with _registry_lock:
+        _registry = None

@@ -1,0 +1,239 @@
+"""HTTP handlers of the hub's own routes: TDs, catalogue, property reads, context, SSE.
+
+Everything is served from bytes encoded once (TDs, static values) or from the
+event plane (streams). Routes are a plain list (``routes``) so the hub, and
+later the TD directory, can add theirs to the same tornado Application.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+import tornado.web
+from tornado.iostream import StreamClosedError
+
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
+from wott_hub.td.builder import CONTEXT_PATH, tactile_context
+
+from .context import ServingContext
+from .forms import PREFIX
+from .things import ServedThing
+
+__all__ = ["routes"]
+
+_CONTEXT_BYTES: bytes | None = None
+
+
+class _Base(tornado.web.RequestHandler):
+    def initialize(self, ctx: ServingContext) -> None:
+        self.ctx = ctx
+
+    def set_default_headers(self) -> None:
+        # browsers (the web twin, any WoT web client) read TDs and streams cross-origin
+        self.set_header("Access-Control-Allow-Origin", "*")
+
+    def options(self, *_args) -> None:
+        self.set_header("Access-Control-Allow-Methods", "GET, OPTIONS")
+        self.set_header("Access-Control-Allow-Headers", "Last-Event-ID, Accept, Content-Type")
+        self.set_status(204)
+
+    def thing(self, thing_id: str) -> ServedThing:
+        thing = self.ctx.things.get(thing_id)
+        if thing is None:
+            raise tornado.web.HTTPError(404, reason=f"Unknown Thing {thing_id!r}")
+        return thing
+
+    def write_json_text(self, text: str | bytes, content_type: str = "application/json") -> None:
+        self.set_header("Content-Type", content_type)
+        self.finish(text)
+
+    def write_error(self, status_code: int, **kwargs: Any) -> None:
+        # problem+json, as the TD directory does, instead of tornado's HTML page
+        self.set_header("Content-Type", "application/problem+json")
+        self.finish(json.dumps({"title": self._reason, "status": status_code}))
+
+
+class CatalogueHandler(_Base):
+    """``{id: "/wot/<id>"}``, like wotpy's catalogue; ``?expanded=1`` inlines the TDs."""
+
+    def get(self) -> None:
+        if self.get_query_argument("expanded", "") not in ("", "0", "false"):
+            body = b"{" + b",".join(json.dumps(t.id).encode() + b":" + t.td_bytes()
+                                    for t in self.ctx.things) + b"}"
+            self.write_json_text(body)
+            return
+        self.write_json_text(json.dumps({t.id: f"{PREFIX}/{t.id}" for t in self.ctx.things}))
+
+
+class TDHandler(_Base):
+    def get(self, thing_id: str) -> None:
+        thing = self.thing(thing_id)
+        etag = thing.etag
+        self.set_header("ETag", etag)
+        if self.request.headers.get("If-None-Match") == etag:
+            self.set_status(304)
+            self.finish()
+            return
+        self.write_json_text(thing.td_bytes(), "application/td+json")
+
+    def compute_etag(self) -> None:  # we set our own, from the cached TD
+        return None
+
+
+class PropertyHandler(_Base):
+    def get(self, thing_id: str, name: str) -> None:
+        value = self.thing(thing_id).read(name)
+        if value is None:
+            raise tornado.web.HTTPError(404, reason=f"Unknown property {name!r}")
+        self.write_json_text(value)
+
+    def compute_etag(self) -> None:
+        return None
+
+
+class AllPropertiesHandler(_Base):
+    def get(self, thing_id: str) -> None:
+        self.write_json_text(self.thing(thing_id).read_all())
+
+
+class ContextHandler(_Base):
+    def get(self) -> None:
+        global _CONTEXT_BYTES
+        if _CONTEXT_BYTES is None:
+            _CONTEXT_BYTES = json.dumps(tactile_context(), indent=1).encode()
+        self.write_json_text(_CONTEXT_BYTES, "application/ld+json")
+
+
+class HealthzHandler(_Base):
+    def get(self) -> None:
+        self.write_json_text('{"status":"ok"}')
+
+
+class _StreamHandler(_Base):
+    """SSE (``Accept: text/event-stream``), else one long-poll response (wotpy's HTTP client).
+
+    Resume: ``Last-Event-ID`` (or ``?lastEventId=``) is the last seq the client
+    has; it gets every later record of the stream, from memory or history,
+    then the live ones, each exactly once. A long-poll given one gets the next.
+    """
+
+    _sub = None
+    _last_write = 0.0
+    _ended = False
+
+    def _after(self) -> int | None:
+        raw = self.request.headers.get("Last-Event-ID") or self.get_query_argument("lastEventId", None)
+        if raw is None or raw.strip() == "":
+            return None
+        try:
+            return int(raw)
+        except ValueError:
+            msg = f"Last-Event-ID must be an integer, got {raw!r}"
+            raise tornado.web.HTTPError(400, reason=msg) from None
+
+    async def stream(self, thing: ServedThing, interest: tuple[int, str | None]) -> None:
+        after = self._after()
+        sse = "text/event-stream" in self.request.headers.get("Accept", "")
+        if not self.ctx.streams_ready.is_set():
+            await self.ctx.streams_ready.wait()
+        sub = self._sub = self.ctx.plane.subscribe(thing.id, interest, after=after)
+        self.ctx.sse.add(self)
+        try:
+            if not sse:
+                await self._long_poll(sub)
+                return
+            # Nagle + delayed ACK would hold small event frames back by up to 40 ms
+            self.request.connection.stream.set_nodelay(True)
+            self.set_header("Content-Type", "text/event-stream; charset=utf-8")
+            self.set_header("Cache-Control", "no-cache")
+            self.set_header("X-Accel-Buffering", "no")
+            self.write(b": stream open\n\n")  # headers out now; comments are ignored by clients
+            await self.flush()
+            self._last_write = time.monotonic()
+            async for batch in sub.batches():
+                if sub.gap is not None:
+                    self.write(f": gap: records after {sub.gap[0]} before {sub.gap[1]} are not "
+                               f"recorded\n\n".encode())
+                    sub.gap = None
+                if batch[0].trace is None:
+                    self.write(b"".join([r.sse() for r in batch]))
+                else:
+                    self._write_traced(batch)
+                self._last_write = time.monotonic()
+                await self.flush()
+        except StreamClosedError:
+            pass
+        finally:
+            sub.close()
+            self.ctx.sse.discard(self)
+        if not self._finished and not self.request.connection.stream.closed():
+            self.finish()
+
+    def _write_traced(self, batch) -> None:
+        """Benchmarks only: stamp when each record was handed to the socket layer."""
+        self.write(b"".join([r.sse() for r in batch]))
+        t = time.perf_counter_ns()
+        for r in batch:
+            if r.trace is not None:
+                r.trace["sse"] = t
+
+    async def _long_poll(self, sub) -> None:
+        async for batch in sub.batches():
+            rec = batch[0]
+            self.set_header("X-Event-Id", str(rec.seq))
+            self.write_json_text(rec.data)
+            return
+
+    def heartbeat(self, now: float, every_s: float) -> None:
+        if self._sub is None or self._finished or now - self._last_write < every_s:
+            return
+        if self.request.headers.get("Accept", "").find("text/event-stream") < 0:
+            return
+        try:
+            self.write(b": ping\n\n")
+            self.flush()
+            self._last_write = now
+        except StreamClosedError:
+            self.end_stream()
+
+    def end_stream(self) -> None:
+        if self._sub is not None:
+            self._sub.close()
+
+    def on_connection_close(self) -> None:
+        self.end_stream()
+
+
+class EventStreamHandler(_StreamHandler):
+    async def get(self, thing_id: str, name: str | None = None) -> None:
+        thing = self.thing(thing_id)
+        if name is not None and name not in (thing.td.get("events") or {}):
+            raise tornado.web.HTTPError(404, reason=f"Unknown event {name!r}")
+        await self.stream(thing, (KIND_EVENT, name))
+
+
+class PropertyObserveHandler(_StreamHandler):
+    async def get(self, thing_id: str, name: str) -> None:
+        thing = self.thing(thing_id)
+        if not thing.is_observable(name):
+            raise tornado.web.HTTPError(404, reason=f"No observable property {name!r}")
+        await self.stream(thing, (KIND_PROPERTY, name))
+
+
+def routes(ctx: ServingContext) -> list[tuple]:
+    """The hub's routes, to put before wotpy's in the HTTP server's Application."""
+    k = {"ctx": ctx}
+    t = rf"{PREFIX}/(?P<thing_id>[^/]+)"
+    return [
+        (rf"{PREFIX}/?", CatalogueHandler, k),
+        (rf"{t}/?", TDHandler, k),
+        (rf"{t}/properties/?", AllPropertiesHandler, k),
+        (rf"{t}/properties/(?P<name>[^/]+)/observe", PropertyObserveHandler, k),
+        (rf"{t}/properties/(?P<name>[^/]+)", PropertyHandler, k),
+        (rf"{t}/events/?", EventStreamHandler, k),
+        (rf"{t}/events/(?P<name>[^/]+)", EventStreamHandler, k),
+        (rf"/{CONTEXT_PATH}", ContextHandler, k),
+        (r"/healthz", HealthzHandler, k),
+    ]

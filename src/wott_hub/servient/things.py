@@ -1,0 +1,111 @@
+"""The Things the hub serves: their TD and property values, encoded once.
+
+A ``ServedThing`` is the hub-side truth about one Thing. Its TD and static
+property values are JSON-encoded when it is exposed and served as bytes from
+then on (a barrel's skinNodes is ~70 kB: encoding it per request would cost
+more than the request). Dynamic properties (contactInformation, the hub's
+counters) are read through a function returning the encoded value.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from wott_hub.events.record import encode
+
+__all__ = ["ServedThing", "ThingRegistry"]
+
+
+@dataclass(eq=False)
+class ServedThing:
+    id: str
+    td: dict[str, Any]
+    static: dict[str, str] = field(default_factory=dict)  # name -> encoded JSON
+    dynamic: dict[str, Callable[[], str]] = field(default_factory=dict)  # name -> encoded JSON
+    record: bool = True
+    exposed: Any = None  # the wotpy ExposedThing
+    _td_bytes: bytes | None = None
+    _etag: str | None = None
+
+    @classmethod
+    def create(cls, thing: str, td: dict[str, Any], static_values: dict[str, Any] | None = None,
+               dynamic: dict[str, Callable[[], str]] | None = None, record: bool = True) -> ServedThing:
+        static = {k: encode(v) for k, v in (static_values or {}).items()}
+        return cls(thing, td, static, dict(dynamic or {}), record)
+
+    @property
+    def title(self) -> str:
+        return self.td.get("title", self.id)
+
+    @property
+    def property_names(self) -> list[str]:
+        return list(self.td.get("properties") or {})
+
+    @property
+    def event_names(self) -> list[str]:
+        return list(self.td.get("events") or {})
+
+    def is_observable(self, name: str) -> bool:
+        return bool((self.td.get("properties") or {}).get(name, {}).get("observable"))
+
+    def td_bytes(self) -> bytes:
+        if self._td_bytes is None:
+            self._td_bytes = json.dumps(self.td, ensure_ascii=False).encode()
+            self._etag = '"' + hashlib.blake2b(self._td_bytes, digest_size=12).hexdigest() + '"'
+        return self._td_bytes
+
+    @property
+    def etag(self) -> str:
+        self.td_bytes()
+        return self._etag  # type: ignore[return-value]
+
+    def read(self, name: str) -> str | None:
+        """The encoded value of property ``name``; None if the Thing has no such property."""
+        getter = self.dynamic.get(name)
+        if getter is not None:
+            return getter()
+        value = self.static.get(name)
+        if value is None and name in (self.td.get("properties") or {}):
+            return "null"
+        return value
+
+    def read_all(self) -> str:
+        parts = [f"{json.dumps(n)}:{self.read(n)}" for n in self.property_names]
+        return "{" + ",".join(parts) + "}"
+
+
+class ThingRegistry:
+    """Served Things by id and by the URL-safe name wotpy routes WebSockets with."""
+
+    def __init__(self) -> None:
+        self.by_id: dict[str, ServedThing] = {}
+        self.by_ws_name: dict[str, ServedThing] = {}
+
+    def add(self, thing: ServedThing, ws_name: str) -> None:
+        if thing.id in self.by_id:
+            raise ValueError(f"a Thing with id {thing.id!r} is already served")
+        if ws_name in self.by_ws_name:
+            raise ValueError(f"Thing id {thing.id!r} collides with {self.by_ws_name[ws_name].id!r} "
+                             f"in WebSocket URLs ({ws_name!r}): choose ids that differ after slugify")
+        self.by_id[thing.id] = thing
+        self.by_ws_name[ws_name] = thing
+
+    def remove(self, thing_id: str) -> ServedThing | None:
+        thing = self.by_id.pop(thing_id, None)
+        if thing is not None:
+            for k in [k for k, v in self.by_ws_name.items() if v is thing]:
+                del self.by_ws_name[k]
+        return thing
+
+    def get(self, thing_id: str) -> ServedThing | None:
+        return self.by_id.get(thing_id)
+
+    def __iter__(self):
+        return iter(self.by_id.values())
+
+    def __len__(self) -> int:
+        return len(self.by_id)

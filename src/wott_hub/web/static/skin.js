@@ -1,0 +1,105 @@
+// The skin's geometry, built from the TD's skinNodes and skinCells values alone.
+//
+// A skinDeformedDetection packet carries only each deformed node's displacement
+// norm (mm), not its direction; the twin shows it along the inward normal (how
+// a press deforms a skin), which is exact for normal presses and an
+// approximation for shear. Nodes absent from a packet are at rest (the packet is
+// the complete deformed set; docs/processing.md).
+
+export class Skin {
+  constructor(skinNodes, skinCells) {
+    const nodes = skinNodes.arrayOfNodes || [];
+    const n = nodes.length;
+    this.n = n;
+    this.index = new Map(); // nodeID -> vertex index
+    this.rest = new Float64Array(3 * n);
+    nodes.forEach((node, k) => {
+      this.index.set(node.nodeID, k);
+      const p = node.nodeLocation;
+      this.rest[3 * k] = p.x;
+      this.rest[3 * k + 1] = p.y;
+      this.rest[3 * k + 2] = p.z;
+    });
+    // triangles: quads and larger polygons as fans (cells are counter-clockwise from outside)
+    const tri = [];
+    for (const cell of skinCells.arrayOfCells || []) {
+      const v = cell.connectedNodes.map((id) => this.index.get(id));
+      if (v.some((k) => k === undefined)) continue; // a cell naming an unknown node: skip it
+      for (let t = 1; t + 1 < v.length; t++) tri.push(v[0], v[t], v[t + 1]);
+    }
+    const m = tri.length / 3;
+    this.cells = (skinCells.arrayOfCells || []).length;
+    this.i = new Int32Array(m);
+    this.j = new Int32Array(m);
+    this.k = new Int32Array(m);
+    for (let t = 0; t < m; t++) {
+      this.i[t] = tri[3 * t];
+      this.j[t] = tri[3 * t + 1];
+      this.k[t] = tri[3 * t + 2];
+    }
+    this.normals = this._normals();
+    this.intensity = new Float64Array(n);
+    this.x = new Float64Array(n);
+    this.y = new Float64Array(n);
+    this.z = new Float64Array(n);
+    this.size = this._size();
+  }
+
+  _normals() {
+    // area-weighted vertex normals from the winding (outward for the hub's meshes)
+    const r = this.rest;
+    const acc = new Float64Array(3 * this.n);
+    for (let t = 0; t < this.i.length; t++) {
+      const a = this.i[t], b = this.j[t], c = this.k[t];
+      const ux = r[3 * b] - r[3 * a], uy = r[3 * b + 1] - r[3 * a + 1], uz = r[3 * b + 2] - r[3 * a + 2];
+      const vx = r[3 * c] - r[3 * a], vy = r[3 * c + 1] - r[3 * a + 1], vz = r[3 * c + 2] - r[3 * a + 2];
+      const nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+      for (const v of [a, b, c]) {
+        acc[3 * v] += nx;
+        acc[3 * v + 1] += ny;
+        acc[3 * v + 2] += nz;
+      }
+    }
+    for (let v = 0; v < this.n; v++) {
+      const l = Math.hypot(acc[3 * v], acc[3 * v + 1], acc[3 * v + 2]) || 1;
+      acc[3 * v] /= l;
+      acc[3 * v + 1] /= l;
+      acc[3 * v + 2] /= l;
+    }
+    return acc;
+  }
+
+  _size() {
+    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (let v = 0; v < this.n; v++) {
+      for (let d = 0; d < 3; d++) {
+        lo[d] = Math.min(lo[d], this.rest[3 * v + d]);
+        hi[d] = Math.max(hi[d], this.rest[3 * v + d]);
+      }
+    }
+    return this.n ? Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) : 0;
+  }
+
+  // Positions and per-vertex intensity for one packet; ``scale`` exaggerates the displacement.
+  // Returns the largest intensity in the packet.
+  apply(packet, scale = 1) {
+    const I = this.intensity;
+    I.fill(0);
+    let max = 0;
+    for (const d of packet.arrayOfDeformedNodes || []) {
+      const k = this.index.get(d.deformedNodeID);
+      if (k === undefined) continue;
+      const v = d.deformedNodeIntensity;
+      I[k] = v;
+      if (v > max) max = v;
+    }
+    const r = this.rest, nrm = this.normals;
+    for (let v = 0; v < this.n; v++) {
+      const s = I[v] * scale;
+      this.x[v] = r[3 * v] - s * nrm[3 * v];
+      this.y[v] = r[3 * v + 1] - s * nrm[3 * v + 1];
+      this.z[v] = r[3 * v + 2] - s * nrm[3 * v + 2];
+    }
+    return max;
+  }
+}

@@ -1,0 +1,75 @@
+"""Replay: the recorded payloads, in order, at the requested pace (functional tolerance, not a benchmark)."""
+
+from __future__ import annotations
+
+import asyncio
+import statistics
+
+import pytest
+
+from wott_hub.history import Replayer
+
+
+@pytest.fixture
+def recorded(writer, make_records):
+    start = writer.register_thing("d")
+    recs = make_records("d", start, 240)  # 1 s of a 120 Hz device (event + property per frame)
+    writer.start()
+    for r in recs:
+        writer.submit(r)
+    assert writer.flush()
+    return recs
+
+
+def test_replay_reproduces_payloads_in_order_at_the_requested_speed(reader, recorded):
+    got = []
+
+    async def main():
+        loop = asyncio.get_running_loop()
+        await Replayer(reader, "d", speed=2.0, page=50).run(
+            lambda kind, name, t, data: got.append((loop.time(), kind, name, data)))
+
+    asyncio.run(main())
+    assert [(k, n, d) for _, k, n, d in got] == [(r.kind, r.name, r.data) for r in recorded]
+    t0 = got[0][0]
+    due = [(r.t_ns - recorded[0].t_ns) / 1e9 / 2.0 for r in recorded]
+    late = [(t - t0) - d for (t, *_), d in zip(got, due, strict=True)]
+    assert min(late) > -0.003  # never ahead of the scaled original timing
+    assert statistics.median(late) < 0.05  # and on time (loose: the test machine is shared)
+    span = due[-1]
+    assert span - 0.003 <= got[-1][0] - t0 <= span + 0.5
+
+
+def test_a_time_range_replays_only_that_range(reader, recorded):
+    lo, hi = recorded[100].t_ns, recorded[139].t_ns
+    rp = Replayer(reader, "d", t_from_ns=lo, t_to_ns=hi, speed=0)
+    got = []
+    asyncio.run(rp.run(lambda k, n, t, d: got.append(d)))
+    assert got == [r.data for r in recorded if lo <= r.t_ns <= hi]
+
+
+def test_speed_zero_replays_everything_without_waiting(reader, recorded):
+    rp = Replayer(reader, "d", speed=0)
+    got = []
+    asyncio.run(rp.run(lambda k, n, t, d: got.append(d)))
+    assert got == [r.data for r in recorded] and rp.cycles == 1
+
+
+def test_loop_starts_again_after_the_end(reader, recorded):
+    rp = Replayer(reader, "d", speed=8.0, loop=True)  # a cycle lasts ~0.125 s
+    got = []
+
+    async def main():
+        stop = asyncio.Event()
+        asyncio.get_running_loop().call_later(0.45, stop.set)
+        await rp.run(lambda k, n, t, d: got.append(d), stop)
+
+    asyncio.run(main())
+    assert rp.cycles >= 2
+    n = len(recorded)
+    assert got[:n] == [r.data for r in recorded] and got[n:2 * n] == [r.data for r in recorded]
+
+
+def test_negative_speed_is_refused(reader):
+    with pytest.raises(ValueError):
+        Replayer(reader, "d", speed=-1)

@@ -1,0 +1,58 @@
+"""The hub config file: the documented example loads; mistakes name the file, table and key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from wott_hub.config import ConfigError, HubConfig
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "hub.example.toml"
+
+
+def test_the_documented_example_loads_and_its_device_opens(tmp_path):
+    cfg = HubConfig.load(EXAMPLE)
+    assert (cfg.name, cfg.http_port, cfg.ws_port, cfg.retention_days) == ("lab-hub", 8080, 8081, 30.0)
+    assert cfg.database == str(EXAMPLE.parent / "wott-hub.db")  # relative to the config file
+    assert not cfg.demo and [d.id for d in cfg.devices] == ["finger-1"]
+    dev = cfg.devices[0]
+    assert dev.family == "scene" and dev.settings["shape"] == "flat" and len(dev.settings["step"]) == 2
+    from wott_hub.plugins import get_registry
+
+    driver = get_registry().open_device(dev)
+    assert driver.description.mesh.n_nodes == 256
+
+
+def test_no_devices_means_the_demo():
+    assert HubConfig.from_dict({"hub": {"http_port": 0}}).demo
+
+
+@pytest.mark.parametrize(("doc", "message"), [
+    ({"hub": {"htp_port": 1}}, "[hub].htp_port: unknown key"),
+    ({"hub": {"http_port": 70000}}, "[hub].http_port: a port number"),
+    ({"hub": {"retention_days": -1}}, "[hub].retention_days: a positive number"),
+    ({"hub": {"history": "yes"}}, "[hub].history: true or false"),
+    ({"hubs": {}}, "unknown table(s) ['hubs']"),
+    ({"device": [{"id": "a", "family": "scene"}, {"id": "a", "family": "scene"}]}, "device[1].id"),
+    ({"device": [{"family": "scene"}]}, "device[0].id: required"),
+    ({"device": [{"id": "hub", "family": "scene"}]}, "'hub' is the hub's own Thing"),
+    ({"hub": {"history_skip": ["x"]}, "device": [{"id": "a", "family": "scene"}]}, "unknown device(s) ['x']"),
+])
+def test_mistakes_are_reported_with_their_place(doc, message):
+    with pytest.raises(ConfigError) as e:
+        HubConfig.from_dict(doc, source="hub.toml")
+    assert message in str(e.value) and str(e.value).startswith("hub.toml")
+
+
+def test_ws_port_false_turns_the_websocket_binding_off():
+    assert HubConfig.from_dict({"hub": {"ws_port": False}}).ws_port is None
+
+
+def test_unreadable_and_invalid_files(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read"):
+        HubConfig.load(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[hub\n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        HubConfig.load(bad)

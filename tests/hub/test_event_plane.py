@@ -1,0 +1,143 @@
+"""The event plane: numbering, fan-out by interest, lazy work, resume from ring and history."""
+
+from __future__ import annotations
+
+import asyncio
+
+from wott_hub.events import KIND_EVENT, KIND_PROPERTY, EventPlane, Record
+
+
+async def _drain(sub, n, timeout=2.0):
+    out = []
+
+    async def take():
+        async for batch in sub.batches():
+            out.extend(batch)
+            if len(out) >= n:
+                return
+
+    await asyncio.wait_for(take(), timeout)
+    return out
+
+
+class ListHistory:
+    """A history that keeps committed records in a list (the real one is tested in tests/history)."""
+
+    def __init__(self, plane):
+        self.plane = plane
+        self.queue: list[Record] = []
+        self.rows: list[Record] = []
+
+    def submit(self, rec):
+        self.queue.append(rec)
+
+    def commit(self):
+        self.rows += self.queue
+        if self.queue:
+            self.plane.on_committed({self.queue[-1].thing: self.queue[-1].seq})
+        self.queue = []
+
+    async def fetch(self, thing, after, upto, interest, limit):
+        kind, name = interest
+        rows = [r for r in self.rows if r.thing == thing and after < r.seq <= upto][:limit]
+        reached = rows[-1].seq if len(rows) == limit else upto
+        return [r for r in rows if r.kind == kind and (name is None or r.name == name)], reached
+
+
+def test_each_thing_has_its_own_increasing_sequence():
+    plane = EventPlane()
+    plane.add_stream("a", record=True, start_after=41)
+    plane.add_stream("b", record=True, start_after=0)
+    seqs = [plane.publish(t, KIND_EVENT, "e", 0, "1").seq for t in "abab"]
+    assert seqs == [42, 1, 43, 2]
+
+
+def test_unrecorded_streams_start_above_any_earlier_run():
+    plane = EventPlane()
+    st = plane.add_stream("x", record=False)
+    assert st.seq > 1_600_000_000_000_000  # microseconds since the epoch: a restart never goes below
+
+
+def test_records_nobody_wants_are_not_wanted():
+    plane = EventPlane()
+    plane.add_stream("a", record=False)
+    assert not plane.wants("a", KIND_EVENT, "skinDeformedDetection")
+    sub = plane.subscribe("a", (KIND_EVENT, "skinDeformedDetection"))
+    assert plane.wants("a", KIND_EVENT, "skinDeformedDetection")
+    assert not plane.wants("a", KIND_EVENT, "actionDetection")
+    sub.close()
+    assert not plane.wants("a", KIND_EVENT, "skinDeformedDetection")
+    plane.add_stream("r", record=True, start_after=0)
+    assert plane.wants("r", KIND_PROPERTY, "contactInformation")  # history wants everything
+
+
+def test_fan_out_by_interest():
+    async def main():
+        plane = EventPlane()
+        plane.add_stream("a", record=False)
+        one = plane.subscribe("a", (KIND_EVENT, "x"))
+        every = plane.subscribe("a", (KIND_EVENT, None))
+        props = plane.subscribe("a", (KIND_PROPERTY, "p"))
+        for name, kind in (("x", KIND_EVENT), ("y", KIND_EVENT), ("p", KIND_PROPERTY)):
+            plane.publish("a", kind, name, 0, "0")
+        assert [r.name for r in await _drain(one, 1)] == ["x"]
+        assert [r.name for r in await _drain(every, 2)] == ["x", "y"]
+        assert [r.name for r in await _drain(props, 1)] == ["p"]
+
+    asyncio.run(main())
+
+
+def test_resume_serves_the_ring_then_live_without_gap_or_duplicate():
+    async def main():
+        plane = EventPlane(ring_size=100)
+        plane.add_stream("a", record=False)
+        first = [plane.publish("a", KIND_EVENT, "x", 0, str(i)).seq for i in range(10)]
+        sub = plane.subscribe("a", (KIND_EVENT, "x"), after=first[3])
+        later = [plane.publish("a", KIND_EVENT, "x", 0, str(i)).seq for i in range(5)]
+        got = [r.seq for r in await _drain(sub, 11)]
+        assert got == first[4:] + later
+
+    asyncio.run(main())
+
+
+def test_resume_older_than_the_ring_reads_history_after_it_is_committed():
+    async def main():
+        plane = EventPlane(ring_size=10)
+        hist = ListHistory(plane)
+        plane.history_sink = plane.history_source = hist
+        plane.add_stream("a", record=True, start_after=0)
+        for i in range(50):
+            plane.publish("a", KIND_EVENT, "x" if i % 2 else "y", 0, str(i))
+            if i == 30:
+                hist.commit()
+        # the ring holds 10 + what is not committed yet; the oldest records are only in history
+        sub = plane.subscribe("a", (KIND_EVENT, "x"), after=5)
+        asyncio.get_running_loop().call_later(0.05, hist.commit)  # the rest commits a bit later
+        plane.publish("a", KIND_EVENT, "x", 0, "live")
+        got = [r.seq for r in await _drain(sub, 24)]
+        assert got == [s for s in range(6, 51) if s % 2 == 0] + [51]
+
+    asyncio.run(main())
+
+
+def test_unrecorded_resume_past_the_ring_reports_the_gap():
+    async def main():
+        plane = EventPlane(ring_size=5)
+        plane.add_stream("a", record=False, start_after=0)
+        for i in range(20):
+            plane.publish("a", KIND_EVENT, "x", 0, str(i))
+        sub = plane.subscribe("a", (KIND_EVENT, "x"), after=2)
+        got = [r.seq for r in await _drain(sub, 5)]
+        assert got == [16, 17, 18, 19, 20] and sub.gap == (2, 16)
+
+    asyncio.run(main())
+
+
+def test_a_subscriber_that_falls_too_far_behind_is_cut_off():
+    plane = EventPlane(max_pending=10)
+    plane.add_stream("a", record=False)
+    sub = plane.subscribe("a", (KIND_EVENT, None))
+    for i in range(11):
+        plane.publish("a", KIND_EVENT, "x", 0, str(i))
+    assert sub.closed and sub.overflowed and plane.overflow_disconnects == 1
+    assert not plane.stream("a").subs  # and costs nothing any more
