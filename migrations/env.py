@@ -12,11 +12,13 @@ import os
 
 from alembic import context
 from sqlalchemy import create_engine
+from wott_directory.models import Base as DirectoryBase
 
 from wott_hub.history.models import Base
 
 config = context.config
-target_metadata = Base.metadata
+# the history's tables and the embedded TD directory's (tdd_*, revision 0002)
+target_metadata = [Base.metadata, DirectoryBase.metadata]
 
 
 def _url() -> str:

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from wott_hub.network.config import DirectoryConfig, DiscoveryConfig, parse_directory, parse_discovery
+
 __all__ = ["ConfigError", "HubConfig"]
 
 
@@ -39,12 +41,16 @@ class HubConfig:
     ring_size: int = 4096  # records per Thing kept in memory for SSE resume
     max_pending: int = 100_000  # records a subscriber may fall behind before it is cut off
     heartbeat_s: float = 15.0
+    workers: int = 0  # processes running the devices' drivers and processing; 0: in the hub's process
     devices: tuple[Any, ...] = field(default_factory=tuple)  # wott_hub.plugins.DeviceConfig
+    directory: DirectoryConfig = field(default_factory=DirectoryConfig)  # [directory]: on by default
+    discovery: DiscoveryConfig = field(default_factory=DiscoveryConfig.off)  # [discovery]: files turn mDNS on
     demo: bool = False  # no [[device]]: run the demo scene
     source: str = "<defaults>"
 
     @classmethod
     def demo_config(cls, **overrides: Any) -> HubConfig:
+        overrides.setdefault("discovery", DiscoveryConfig())  # the demo announces (on its host only)
         return cls(demo=True, source="<demo>", **overrides)
 
     @classmethod
@@ -64,13 +70,14 @@ class HubConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<config>") -> HubConfig:
-        unknown = set(data) - {"hub", "device"}
+        unknown = set(data) - {"hub", "device", "directory", "discovery"}
         if unknown:
-            raise ConfigError(f"{source}: unknown table(s) {sorted(unknown)}; expected [hub] and [[device]]")
+            raise ConfigError(f"{source}: unknown table(s) {sorted(unknown)}; expected [hub], [[device]], "
+                              "[directory] and [discovery]")
         hub = data.get("hub", {})
         if not isinstance(hub, dict):
             raise ConfigError(f"{source}: [hub] must be a table")
-        known = {f.name for f in fields(cls)} - {"devices", "demo", "source"}
+        known = {f.name for f in fields(cls)} - {"devices", "demo", "source", "directory", "discovery"}
         values: dict[str, Any] = {}
         for key, value in hub.items():
             if key not in known:
@@ -99,7 +106,9 @@ class HubConfig:
         skip = set(values.get("history_skip", ()))
         if skip - ids:
             raise ConfigError(f"{source}: [hub].history_skip names unknown device(s) {sorted(skip - ids)}")
-        return cls(devices=tuple(parsed), demo=not parsed, source=source, **values)
+        return cls(devices=tuple(parsed), demo=not parsed, source=source,
+                   directory=parse_directory(data.get("directory", {}), source),
+                   discovery=parse_discovery(data.get("discovery", {}), source), **values)
 
     @property
     def retention(self):
@@ -117,6 +126,7 @@ def _replace(cfg: HubConfig, **changes: Any) -> HubConfig:
 _PORTS = ("http_port", "ws_port", "catalogue_port")
 _POSITIVE = ("retention_days", "retention_mb", "history_batch_ms", "heartbeat_s")
 _COUNTS = ("history_batch_max", "ring_size", "max_pending")
+_NATURALS = ("workers",)
 _STRINGS = ("name", "host", "public_host", "database")
 
 
@@ -134,6 +144,10 @@ def _check(key: str, value: Any, where: str) -> Any:
     if key in _COUNTS:
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ConfigError(f"{where}: a positive integer, got {value!r}")
+        return value
+    if key in _NATURALS:
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ConfigError(f"{where}: a whole number >= 0, got {value!r}")
         return value
     if key in _STRINGS:
         if not isinstance(value, str) or not value.strip():

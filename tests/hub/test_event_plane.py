@@ -141,3 +141,21 @@ def test_a_subscriber_that_falls_too_far_behind_is_cut_off():
         plane.publish("a", KIND_EVENT, "x", 0, str(i))
     assert sub.closed and sub.overflowed and plane.overflow_disconnects == 1
     assert not plane.stream("a").subs  # and costs nothing any more
+
+
+def test_the_hub_writes_skin_deformed_packets_exactly_as_the_processor_describes_them():
+    import numpy as np
+
+    from wott_hub.events.record import encode
+    from wott_hub.examples import example_device
+    from wott_hub.hub import skin_deformed_json
+    from wott_hub.tactile import FrameProcessor, TactileFrame
+    from wott_hub.tactile.indentation import Indenter, indent
+
+    desc = example_device("flat")
+    proc = FrameProcessor(desc.mesh)
+    centre = desc.mesh.nodes[desc.mesh.free_indices[100]]
+    d = indent(desc.mesh, [Indenter(centre, 1.3, 5.0, np.array([0.2, -0.1, 0.0]))])
+    for t, disp in ((1, d), (2, d * 0.37), (3, np.zeros_like(d))):  # contact, smaller, release
+        res = proc.process(TactileFrame(t, disp))
+        assert skin_deformed_json(res) == encode(res.skin_deformed_detection())

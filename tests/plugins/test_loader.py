@@ -35,7 +35,7 @@ def test_a_plugin_that_raises_on_import_is_listed_and_the_others_load(fake_site)
     assert good.families == ("echo",)
     assert good.hooks == ("wott_hub_claim_service", "wott_hub_claim_td", "wott_hub_demo_devices",
                           "wott_hub_families", "wott_hub_open_device")
-    assert plugins["builtin"].families == ("scene",) and plugins["builtin"].error is None
+    assert plugins["builtin"].families == ("scene", "wot-remote") and plugins["builtin"].error is None
 
 
 def test_bad_registrations_are_reported_not_raised(fake_site):
@@ -52,7 +52,8 @@ def test_bad_registrations_are_reported_not_raised(fake_site):
     assert "family 'badschema': invalid settings schema" in result.error
     assert result.families == ("fine",)
     assert {f: i.plugin for f, i in registry.families().items()} == {
-        "scene": "builtin", "echo": "fakegood", "flaky": "fakehook", "fine": "fakeresult"}
+        "scene": "builtin", "wot-remote": "builtin", "echo": "fakegood", "flaky": "fakehook",
+        "fine": "fakeresult"}
 
 
 def test_a_hook_that_raises_is_recorded_and_the_other_plugins_still_answer(fake_site):
@@ -103,7 +104,7 @@ def test_open_device_validates_settings_naming_the_field_and_fills_defaults(fake
         with pytest.raises(DriverError) as e:
             registry.open_device(DeviceConfig("e1", "echo", settings))
         assert str(e.value) == f"device 'e1' (family 'echo'): setting {message}"
-    with pytest.raises(DriverError, match=r"'nope' \(installed families: echo, fine, flaky, scene\)"):
+    with pytest.raises(DriverError, match=r"'nope' \(installed families: echo, fine, flaky, scene, wot-remote\)"):
         registry.open_device(DeviceConfig("x", "nope", {}))
     with pytest.raises(DriverError, match="'fine' but does not implement wott_hub_open_device"):
         registry.open_device(DeviceConfig("x", "fine", {}))

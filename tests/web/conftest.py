@@ -1,4 +1,4 @@
-"""A real hub with simulated devices, its TD directory, and a real headless Chromium.
+"""A real hub with simulated devices, its own TD directory, and a real headless Chromium.
 
 The browser is Debian's ``chromium`` driven by Playwright (``executable_path``);
 ``.ci/run`` installs it. If it is missing the tests fail, they never skip: a
@@ -14,11 +14,12 @@ import tempfile
 import threading
 from pathlib import Path
 
-import httpx
+import numpy as np
 import pytest
 
 from wott_hub.config import HubConfig
 from wott_hub.hub import Hub, demo_devices
+from wott_hub.network import DirectoryConfig
 
 CHROMIUM = os.environ.get("WOTT_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -29,16 +30,12 @@ CHROMIUM_ARGS = [
 
 
 class TwinHub:
-    """A hub on 127.0.0.1 (free ports) in its own thread, with a TD directory at ``/things``.
-
-    If the hub does not mount a directory itself, one is mounted here the way the hub will
-    (``wott_directory.directory_handlers`` on the hub's HTTP port) and every served TD is
-    registered in it, so the pages are tested against the W3C Discovery API.
-    """
+    """A hub on 127.0.0.1 (free ports) in its own thread. Its own TD directory is at ``/things``
+    (every Thing it serves is registered there as it is exposed, deleted as it is removed), so the
+    pages are tested against the W3C Discovery API; ``directory=False`` turns it off."""
 
     def __init__(self, config: HubConfig) -> None:
         self.hub = Hub(config)
-        self.directory = None
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
 
@@ -46,24 +43,7 @@ class TwinHub:
         self.thread.start()
         self.call(self.hub.start, timeout=60)
         self.url = self.hub.http_url
-        if httpx.get(f"{self.url}/things", timeout=10).status_code == 404:
-            self.call(self._mount_directory)
         return self
-
-    async def _mount_directory(self) -> None:
-        from wott_directory import Directory, DirectorySettings, directory_handlers
-
-        self.directory = Directory(DirectorySettings(base_url=f"{self.url}/"), "sqlite://")
-        await self.directory.start()
-        self.hub.add_handlers(directory_handlers(self.directory))
-        await self.register()
-
-    async def register(self) -> None:
-        """(Re-)register every Thing the hub serves."""
-        if self.directory is None:
-            return
-        for thing in list(self.hub.server.things):
-            await self.directory.put(thing.td["id"], thing.td)
 
     def call(self, fn, *args, timeout: float = 30, **kwargs):
         """Run ``fn(*args, **kwargs)`` (a function or coroutine function) on the hub's loop."""
@@ -76,41 +56,63 @@ class TwinHub:
         return asyncio.run_coroutine_threadsafe(wrapper(), self.loop).result(timeout)
 
     def stop(self) -> None:
-        if self.directory is not None:
-            self.call(self.directory.stop)
         self.call(self.hub.stop, timeout=60)
         self.loop.call_soon_threadsafe(self.loop.stop)
         self.thread.join(10)
 
 
 def barrel_scene(device_id: str = "barrel", *, loop: bool = True, steps: list[dict] | None = None):
-    """A ``scene`` barrel (the TacLink mesh): by default a press and a slide every 1.6 s."""
+    """A ``scene`` barrel (the TacLink mesh): by default a press then a slide every 1.6 s, on the
+    side the device page's camera looks at."""
     from wott_hub.examples import example_device
     from wott_hub.plugins import DeviceConfig
 
     mesh = example_device("barrel").mesh
     free = mesh.free_indices
-    a = [round(float(v), 3) for v in mesh.nodes[free[len(free) // 2]]]
-    b = [round(float(v), 3) for v in mesh.nodes[free[len(free) // 3]]]
+    p = mesh.nodes[free]
+    mid = (p[:, 2].min() + p[:, 2].max()) / 2
+    facing = p[:, 0] - p[:, 1]  # the camera's eye is at +x, -y
+
+    def at(z: float) -> list[float]:
+        k = int(np.argmax(facing - 2 * np.abs(p[:, 2] - z)))
+        return [round(float(v), 3) for v in p[k]]
+
     steps = steps or [
-        {"kind": "press", "at": a, "start_s": 0.1, "duration_s": 0.7, "depth_mm": 3.0, "radius_mm": 14.0},
-        {"kind": "slide", "at": b, "to": a, "start_s": 0.9, "duration_s": 0.6, "depth_mm": 2.0,
-         "radius_mm": 12.0},
+        {"kind": "press", "at": at(mid), "start_s": 0.1, "duration_s": 0.7, "depth_mm": 4.0,
+         "radius_mm": 25.0},
+        {"kind": "slide", "at": at(mid + 50), "to": at(mid), "start_s": 0.9, "duration_s": 0.6,
+         "depth_mm": 2.5, "radius_mm": 18.0},
     ]
     return DeviceConfig(device_id, "scene", {"title": f"Barrel skin ({device_id})", "shape": "barrel",
                                              "loop": loop, "rate_hz": 120.0, "step": steps})
 
 
+def start_hub(db: Path, devices, *, directory: bool = True) -> TwinHub:
+    cfg = HubConfig(http_port=0, ws_port=0, database=str(db), ring_size=20_000, history_batch_ms=20,
+                    devices=tuple(devices), directory=DirectoryConfig(enabled=directory))
+    return TwinHub(cfg).start()
+
+
 @pytest.fixture(scope="package")
 def twin(tmp_path_factory):
-    """The demo fleet plus a busy scene barrel, history on, a directory at /things."""
-    db = tmp_path_factory.mktemp("twin") / "hub.db"
-    devices = (*demo_devices(), barrel_scene("barrel"))
-    cfg = HubConfig(http_port=0, ws_port=0, database=str(db), ring_size=20_000, history_batch_ms=20,
-                    devices=devices)
-    hub = TwinHub(cfg).start()
+    """A hub with one busy scene barrel, history on, a directory at /things."""
+    hub = start_hub(tmp_path_factory.mktemp("twin") / "hub.db", [barrel_scene("barrel")])
     yield hub
     hub.stop()
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """The demo fleet (each installed plugin's simulated devices) and the scene barrel."""
+    hub = start_hub(tmp_path_factory.mktemp("fleet") / "hub.db", [*demo_devices(), barrel_scene("barrel")])
+    yield hub
+    hub.stop()
+
+
+@pytest.fixture(scope="package")
+def hub_runner():
+    """start_hub(db, devices, directory=...) for tests needing a hub of their own."""
+    return start_hub
 
 
 @pytest.fixture(scope="package")
@@ -133,14 +135,39 @@ def browser():
             shutil.rmtree(profile, ignore_errors=True)
 
 
-@pytest.fixture
-def page(browser):
+def new_page(browser):
     pg = browser.new_page()
     errors: list[str] = []
     pg.on("pageerror", lambda e: errors.append(str(e)))
     pg.errors = errors
+    return pg
+
+
+@pytest.fixture
+def page(browser):
+    pg = new_page(browser)
     yield pg
     pg.close()
+
+
+def wait_until(page, expression: str, timeout: float = 15_000, arg=None):
+    """page.wait_for_function, failing with the page's state (``window.twin``) on timeout."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    try:
+        return page.wait_for_function(expression, arg=arg, timeout=timeout)
+    except PlaywrightTimeout:
+        state = page.evaluate("(() => { try { const t = {...window.twin};"
+                              " if (t.seqs) t.seqs = t.seqs.length;"
+                              " return JSON.stringify(t).slice(0, 4000); }"
+                              " catch (e) { return String(e); } })()")
+        raise AssertionError(f"timed out after {timeout} ms waiting for {expression}\n"
+                             f"page errors: {getattr(page, 'errors', [])}\nwindow.twin: {state}") from None
+
+
+@pytest.fixture(scope="package")
+def wait():
+    return wait_until
 
 
 @pytest.fixture(scope="package")
@@ -149,9 +176,9 @@ def shots(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("screenshots")
 
 
-def save_shot(page, shots: Path, name: str) -> Path:
+def save_shot(page, shots: Path, name: str, **options) -> Path:
     path = shots / f"{name}.png"
-    page.screenshot(path=str(path))
+    page.screenshot(path=str(path), **options)
     extra = os.environ.get("WOTT_TWIN_SHOTS")
     if extra:
         Path(extra).mkdir(parents=True, exist_ok=True)
@@ -162,9 +189,15 @@ def save_shot(page, shots: Path, name: str) -> Path:
 
 @pytest.fixture(scope="package")
 def screenshot(shots):
-    return lambda page, name: save_shot(page, shots, name)
+    return lambda page, name, **options: save_shot(page, shots, name, **options)
 
 
 @pytest.fixture(scope="package")
 def scene_barrel():
     return barrel_scene
+
+
+@pytest.fixture(scope="package")
+def open_page():
+    """new_page(browser) for module-scoped pages (test modules cannot import conftest)."""
+    return new_page

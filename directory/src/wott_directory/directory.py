@@ -43,9 +43,13 @@ log = logging.getLogger("wott_directory")
 class Directory:
     """A Thing Description Directory; serve it with ``make_app`` or ``directory_handlers``."""
 
-    def __init__(self, settings: DirectorySettings | None = None, engine: Engine | str = "sqlite://") -> None:
+    def __init__(self, settings: DirectorySettings | None = None, engine: Engine | str = "sqlite://", *,
+                 create_tables: bool = True) -> None:
+        """``create_tables=False`` when the owner of ``engine`` migrates the schema itself (the hub's
+        Alembic revisions create ``tdd_things`` and ``tdd_events``): the directory then only checks
+        they exist, so ``create_all`` never races or contradicts the migrations."""
         self.settings = settings or DirectorySettings()
-        self.store = ThingStore(engine)
+        self.store = ThingStore(engine, create_tables=create_tables)
         self.search_engine = SearchEngine(max_length=self.settings.max_query_length)
         self.events = EventHub(self.settings.event_retention, self.settings.sse_queue)
         self._things: dict[str, Enriched] = {}

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, TypeVar
 
-from sqlalchemy import create_engine, delete, event, select
+from sqlalchemy import create_engine, delete, event, inspect, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.pool import StaticPool
 
@@ -66,8 +66,12 @@ def _naive_utc(moment: datetime | None) -> datetime | None:
 
 
 class ThingStore:
-    def __init__(self, engine: Engine | str) -> None:
+    """``create_tables=False``: the tables are someone else's to create (the hub's Alembic
+    migrations); opening checks they are there instead of creating them."""
+
+    def __init__(self, engine: Engine | str, create_tables: bool = True) -> None:
         self.owns_engine = isinstance(engine, str)
+        self.create_tables = create_tables
         self.engine = make_engine(engine) if isinstance(engine, str) else engine
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wott-directory-db")
 
@@ -79,7 +83,14 @@ class ThingStore:
         return await self._run(self._open, event_retention)
 
     def _open(self, event_retention: int) -> tuple[list[StoredThing], list[StoredEvent]]:
-        create_schema(self.engine)
+        if self.create_tables:
+            create_schema(self.engine)
+        else:
+            tables = set(inspect(self.engine).get_table_names())
+            missing = sorted({ThingRow.__tablename__, EventRow.__tablename__} - tables)
+            if missing:
+                raise RuntimeError(f"the directory's tables {', '.join(missing)} are missing from "
+                                   f"{self.engine.url!r}: run the migrations that create them first")
         with self.engine.connect() as conn:
             things = [StoredThing(r.id, json.loads(r.td), r.anonymous, r.own) for r in conn.execute(
                 select(ThingRow.id, ThingRow.td, ThingRow.anonymous, ThingRow.own))]

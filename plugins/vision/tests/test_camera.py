@@ -50,3 +50,12 @@ def test_parse_spec():
     for bad in (-1, "", True, 1.5):
         with pytest.raises(CameraError):
             parse_spec(bad)
+
+
+def test_importing_the_package_loads_no_opencv():
+    import subprocess
+    import sys
+
+    code = ("import sys, wott_vision.markers, wott_vision.tracking, wott_vision.render, "
+            "wott_vision.camera, wott_vision.driver\nsys.exit('cv2' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0

@@ -53,6 +53,16 @@ class Driver(abc.ABC):
     def frames(self) -> AsyncIterator[TactileFrame]:
         """Yield frames as the device produces them, until ``close()``."""
 
+    async def prepare(self) -> None:
+        """Called by the hub once, after opening and before reading ``description``.
+
+        Default: nothing, the description came with the driver. A device that can
+        describe itself only over its transport (a network WoT device's mesh, read
+        from its properties) does that I/O here, without blocking the loop, and
+        raises ``DriverError`` if it cannot.
+        """
+        return None
+
     def health(self) -> HealthStatus:
         return self._health
 

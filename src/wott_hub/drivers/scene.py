@@ -89,9 +89,11 @@ class SceneDriver(Driver):
                     k += missed
                     self.frames_skipped += missed
                     self.set_health(Health.degraded, "consumer slower than the frame rate: frames skipped")
+                    await asyncio.sleep(0)  # late means the loop is busy: let the others run
                     continue
                 else:
                     self.set_health(Health.ok)
+                    await asyncio.sleep(0)
             else:
                 await asyncio.sleep(0)  # let others run; never monopolise the loop
             frame = TactileFrame(wall0_ns + int(round(t_s * 1e9)), self._displacement(t_s))

@@ -33,7 +33,7 @@ from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
 
 __all__ = ["HEAD_REVISION", "KIND_EVENT", "KIND_PROPERTY", "Base", "EventRow", "ThingRow"]
 
-HEAD_REVISION = "0001"
+HEAD_REVISION = "0002"  # 0002: the embedded directory's tables (tdd_things, tdd_events)
 """The newest migration in migrations/versions (a test checks it): a database already
 there is opened without importing Alembic, which costs ~0.5 s of start-up."""
 

@@ -24,6 +24,12 @@ def parse_time(text: str, now_ns: int | None = None) -> int:
     if m:
         return now_ns - int(float(m.group(1)) * _UNIT[m.group(2)] * 1e9)
     try:
+        whole = int(s)  # exact: nanoseconds do not survive a float
+    except ValueError:
+        pass
+    else:
+        return whole if whole > 10**14 else whole * 10**9
+    try:
         number = float(s)
     except ValueError:
         pass

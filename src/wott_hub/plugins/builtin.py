@@ -1,4 +1,5 @@
-"""The plugin inside the core package: family ``scene``, the ground-truth driver.
+"""The plugin inside the core package: family ``scene``, the ground-truth driver, and
+family ``wot-remote``, tactile devices that speak WoT themselves (``wot_remote.py``).
 
 A ``scene`` device plays a scripted scene on one of the example skins and
 yields its ground-truth displacement directly (no raw signal, no simulator of
@@ -12,6 +13,7 @@ from typing import Any
 
 from wott_hub.tactile.materials import MATERIALS
 
+from . import wot_remote
 from .hookspecs import hookimpl
 from .model import DeviceConfig, FamilyInfo
 
@@ -48,11 +50,13 @@ def wott_hub_families() -> list[FamilyInfo]:
         FAMILY,
         "Ground truth of a scripted scene on an example skin, no raw signal (benchmarks, tests).",
         SCHEMA,
-    )]
+    ), wot_remote.family()]
 
 
 @hookimpl
 def wott_hub_open_device(config: DeviceConfig):
+    if config.family == wot_remote.FAMILY:
+        return wot_remote.open_device(config)
     if config.family != FAMILY:
         return None
     from dataclasses import replace
@@ -78,3 +82,8 @@ def wott_hub_open_device(config: DeviceConfig):
     if "epsilon_mm" in s:
         changes["epsilon_mm"] = float(s["epsilon_mm"])
     return SceneDriver(replace(desc, **changes), scene, float(s["rate_hz"]), realtime=bool(s["realtime"]))
+
+
+@hookimpl
+def wott_hub_claim_td(td: dict[str, Any]) -> DeviceConfig | None:
+    return wot_remote.claim_td(td)

@@ -26,7 +26,7 @@ class ProcessingParams:
     epsilon_mm: float = 0.1
     intensity_decimals: int = 3  # µm resolution in packets: smaller JSON, no visible loss
     min_contact_nodes: int = 1
-    modulus_mpa: float = 0.069  # Ecoflex 00-30
+    modulus_mpa: float = 0.118  # Ecoflex 00-30 (MATERIALS); the hub passes each device's material
     thickness_mm: float = 3.0
     actions: ActionParams = field(default_factory=ActionParams)
     # "winkler": independent springs under each node (cheap); "stiffness": the Kelvin-Voigt skin's

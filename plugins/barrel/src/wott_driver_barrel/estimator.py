@@ -135,6 +135,10 @@ class BarrelEstimator:
     def estimate(self, images: tuple[np.ndarray, ...]) -> BarrelEstimate:
         if len(images) != len(self.layout.cameras):
             raise ValueError(f"expected {len(self.layout.cameras)} images, got {len(images)}")
+        for img, cam in zip(images, self.layout.cameras, strict=True):
+            if img.shape[:2] != (cam.height, cam.width):
+                raise ValueError(f"{cam.name} camera delivers {img.shape[1]}x{img.shape[0]} frames; the "
+                                 f"camera model is {cam.width}x{cam.height} (setting cameras.width/height)")
         if not self.uses_markers:
             return BarrelEstimate(self.model.predict_images(images), 0)
         feats, lost, tracked = self.features(images)

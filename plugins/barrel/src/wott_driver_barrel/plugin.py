@@ -8,8 +8,7 @@ cameras (cv2) are opened by the driver's worker thread when the device starts.
 
 from __future__ import annotations
 
-from wott_hub.drivers.base import DriverError
-from wott_hub.plugins import DeviceConfig, FamilyInfo, hookimpl
+from wott_hub.plugins import DeviceConfig, FamilyInfo, hookimpl, naming_device
 
 from .settings import FAMILY, SCHEMA, open_barrel
 
@@ -29,12 +28,10 @@ def wott_hub_families() -> list[FamilyInfo]:
 
 @hookimpl
 def wott_hub_open_device(config: DeviceConfig):
-    if config.family != FAMILY:
-        return None
-    try:
-        return open_barrel(config.id, dict(config.settings))
-    except DriverError as e:
-        raise DriverError(f"device {config.id!r} (family {FAMILY!r}): {e}") from None
+    if config.family == FAMILY:
+        with naming_device(config):
+            return open_barrel(config.id, dict(config.settings))
+    return None
 
 
 @hookimpl

@@ -9,15 +9,15 @@ imported by ``DisplacementModel`` when a device is opened.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from wott_hub.drivers.backoff import Backoff
+from wott_vision.schema import BACKOFF_PROPERTIES, RENDER_PROPERTIES, number, simulator_properties, table
+from wott_vision.settings import backoff, check_material, defaults, section, simulator_source
+
 from wott_hub.drivers.base import DriverError
-from wott_hub.sim.scene import Scene, SceneError
-from wott_hub.tactile import MATERIALS, DeviceDescription
+from wott_hub.tactile import MATERIALS, DeviceDescription, SkinShape
 
 __all__ = ["FAMILY", "SCHEMA", "build_layout", "demo_scene_path", "open_barrel"]
 
@@ -28,71 +28,39 @@ def demo_scene_path() -> Path:
     return Path(str(resources.files("wott_driver_barrel") / "scenes" / "demo.toml"))
 
 
-def _num(default: float, description: str, **extra: Any) -> dict[str, Any]:
-    return {"type": "number", "default": default, "description": description, **extra}
-
-
 _SOURCE = {"oneOf": [{"type": "integer", "minimum": 0}, {"type": "string", "minLength": 1}]}
 
-CAMERAS_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "description": "Camera model of both fisheye cameras (docs/barrel-vision.md).",
-    "default": {},
-    "additionalProperties": False,
-    "properties": {
-        "width": {"type": "integer", "minimum": 64, "default": 640, "description": "Image width, px."},
-        "height": {"type": "integer", "minimum": 64, "default": 480, "description": "Image height, px."},
-        "f_px": _num(234.0, "Equidistant fisheye focal length (image radius per radian), px.",
-                     exclusiveMinimum=0),
-        "offset_mm": _num(6.0, "Distance of each camera beyond its rim, along the axis, mm.", minimum=0),
-    },
-}
+CAMERAS_SCHEMA = table("Camera model of both fisheye cameras (docs/barrel-vision.md).", {
+    "width": {"type": "integer", "minimum": 64, "default": 640, "description": "Image width, px."},
+    "height": {"type": "integer", "minimum": 64, "default": 480, "description": "Image height, px."},
+    "f_px": number(234.0, "Equidistant fisheye focal length (image radius per radian), px.",
+                   exclusiveMinimum=0),
+    "offset_mm": number(6.0, "Distance of each camera beyond its rim, along the axis, mm.", minimum=0),
+})
 
-DETECTOR_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "description": "Marker detector (wott_vision.markers; docs/vision-tracking.md).",
-    "default": {},
-    "additionalProperties": False,
-    "properties": {
-        "threshold": {"type": ["integer", "null"], "minimum": 0, "maximum": 254, "default": None,
-                      "description": "Grey level of a marker; null: Otsu's level per frame."},
-        "min_area": _num(4, "Smallest blob, px.", exclusiveMinimum=0),
-        "max_area": _num(2000, "Largest blob, px.", exclusiveMinimum=0),
-        "split": {"type": "boolean", "default": True,
-                  "description": "Split blobs holding two marker cores (far markers a pixel apart)."},
-        "downscale": {"enum": [1, 2], "default": 1, "description": "Detect on a half-size image."},
-        "mask": {"type": "boolean", "default": True,
-                 "description": "Search only the annulus where markers can appear."},
-    },
-}
+DETECTOR_SCHEMA = table("Marker detector (wott_vision.markers; docs/vision-tracking.md).", {
+    "threshold": {"type": ["integer", "null"], "minimum": 0, "maximum": 254, "default": None,
+                  "description": "Grey level of a marker; null: Otsu's level per frame."},
+    "min_area": number(4, "Smallest blob, px.", exclusiveMinimum=0),
+    "max_area": number(2000, "Largest blob, px.", exclusiveMinimum=0),
+    "split": {"type": "boolean", "default": True,
+              "description": "Split blobs holding two marker cores (far markers a pixel apart)."},
+    "downscale": {"enum": [1, 2], "default": 1, "description": "Detect on a half-size image."},
+    "mask": {"type": "boolean", "default": True,
+             "description": "Search only the annulus where markers can appear."},
+})
 
-TRACKER_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "description": "Marker tracker (wott_vision.tracking).",
-    "default": {},
-    "additionalProperties": False,
-    "properties": {
-        "gate_fraction": _num(0.45, "Search radius as a fraction of the marker spacing.",
-                              exclusiveMinimum=0, maximum=1),
-        "max_gate_px": _num(25.0, "Largest search radius, px.", exclusiveMinimum=0),
-        "predict": {"type": "boolean", "default": False,
-                    "description": "Search where the last velocity carries each marker."},
-        "merge_ratio": _num(1.45, "A blob this many times its marker's rest area is two markers.",
-                            exclusiveMinimum=1),
-    },
-}
+TRACKER_SCHEMA = table("Marker tracker (wott_vision.tracking).", {
+    "gate_fraction": number(0.45, "Search radius as a fraction of the marker spacing.",
+                            exclusiveMinimum=0, maximum=1),
+    "max_gate_px": number(25.0, "Largest search radius, px.", exclusiveMinimum=0),
+    "predict": {"type": "boolean", "default": False,
+                "description": "Search where the last velocity carries each marker."},
+    "merge_ratio": number(1.45, "A blob this many times its marker's rest area is two markers.",
+                          exclusiveMinimum=1),
+})
 
-RENDER_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "description": "Simulator image chain (source = \"sim\" only).",
-    "default": {},
-    "additionalProperties": False,
-    "properties": {
-        "blur_sigma": _num(1.0, "Gaussian lens blur, px.", minimum=0),
-        "noise_std": _num(2.0, "Sensor noise, grey levels.", minimum=0),
-        "seed": {"type": "integer", "default": 0, "description": "Noise seed."},
-    },
-}
+RENDER_SCHEMA = table("Simulator image chain (source = \"sim\" only).", RENDER_PROPERTIES)
 
 SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -106,11 +74,7 @@ SCHEMA: dict[str, Any] = {
                    "default": "sim",
                    "description": "\"sim\" (simulator) or [bottom, top] camera sources: device index, "
                                   "video file or stream URL."},
-        "scene": {"type": "string", "default": "",
-                  "description": "Scene TOML the simulator plays; empty: the bundled demo scene."},
-        "fps": _num(30.0, "Simulator frame rate, frames/s.", exclusiveMinimum=0, maximum=240),
-        "realtime": {"type": "boolean", "default": True,
-                     "description": "Simulator paces frames like cameras (false: as fast as read)."},
+        **simulator_properties(30.0, maximum=240),
         "model": {"type": "string", "default": "",
                   "description": "ONNX displacement model; empty: the bundled default "
                                  "(docs/barrel-vision.md, contract)."},
@@ -123,10 +87,9 @@ SCHEMA: dict[str, Any] = {
                                      "first frame (skin at rest) and ordered by ray and radius."},
         "material": {"type": "string", "enum": sorted(MATERIALS), "default": "ecoflex-00-30",
                      "description": "Skin material."},
-        "epsilon_mm": _num(0.1, "Displacement above which a node counts as deformed, mm.",
-                           exclusiveMinimum=0),
-        "backoff_initial_s": _num(0.05, "First reconnect delay, s.", exclusiveMinimum=0),
-        "backoff_cap_s": _num(5.0, "Longest reconnect delay, s.", exclusiveMinimum=0),
+        "epsilon_mm": number(0.1, "Displacement above which a node counts as deformed, mm.",
+                             exclusiveMinimum=0),
+        **BACKOFF_PROPERTIES,
         "cameras": CAMERAS_SCHEMA,
         "detector": DETECTOR_SCHEMA,
         "tracker": TRACKER_SCHEMA,
@@ -135,22 +98,13 @@ SCHEMA: dict[str, Any] = {
 }
 
 
-def _defaults(schema: dict[str, Any], given: dict[str, Any], where: str = "") -> dict[str, Any]:
-    unknown = sorted(set(given) - set(schema["properties"]))
-    if unknown:
-        raise DriverError(f"unknown setting(s) {', '.join(where + u for u in unknown)}")
-    out = {k: v["default"] for k, v in schema["properties"].items() if "default" in v}
-    out.update(given)
-    return out
-
-
 def build_layout(cameras: dict[str, Any] | None = None):
     """The TacLink mesh, its 16 x 16 markers and the two cameras (settings ``cameras``)."""
     from wott_hub.tactile import taclink_barrel
 
     from .geometry import BarrelLayout, MarkerLayout, default_cameras
 
-    c = _defaults(CAMERAS_SCHEMA, dict(cameras or {}), "cameras.")
+    c = defaults(CAMERAS_SCHEMA, cameras, "cameras.")
     try:
         cams = default_cameras(260.0, offset_mm=float(c["offset_mm"]), f_px=float(c["f_px"]),
                                width=int(c["width"]), height=int(c["height"]))
@@ -160,12 +114,11 @@ def build_layout(cameras: dict[str, Any] | None = None):
 
 
 def describe(device_id: str, s: dict[str, Any], layout) -> DeviceDescription:
-    from wott_hub.examples import example_device
-
-    base = example_device("barrel", device_id=device_id)
-    return replace(
-        base, title=str(s.get("title") or device_id), family=FAMILY, mesh=layout.mesh,
-        material=MATERIALS[s["material"]], epsilon_mm=float(s["epsilon_mm"]),
+    return DeviceDescription(
+        id=device_id, title=str(s.get("title") or device_id), family=FAMILY,
+        shape=SkinShape("barrel", height_mm=260.0, base_radius_mm=36.28, middle_radius_mm=53.36),
+        material=MATERIALS[s["material"]], mesh=layout.mesh, epsilon_mm=float(s["epsilon_mm"]),
+        thickness_mm=3.0,
         description="TacLink-style barrel skin: 16 x 16 markers seen by two fisheye cameras, "
                     "marker tracking and an ONNX model to the 585 free nodes' displacement.",
     )
@@ -178,38 +131,28 @@ def open_barrel(device_id: str, settings: dict[str, Any], *, max_frames: int | N
     from .model import DisplacementModel, default_model_path
     from .simulator import BarrelSimulator, RenderSettings, SimulatedCameras
 
-    s = _defaults(SCHEMA, settings)
-    if s["material"] not in MATERIALS:
-        raise DriverError(f"material: {s['material']!r} is not one of {', '.join(sorted(MATERIALS))}")
+    s = defaults(SCHEMA, settings)
+    check_material(s)
     layout = build_layout(s.get("cameras"))
     description = describe(device_id, s, layout)
     model_path = Path(s["model"]) if s["model"] else default_model_path()
     model = DisplacementModel(model_path, n_features=layout.n_features, n_cameras=len(layout.cameras),
                               free=layout.mesh.free, expect=str(s["model_input"]),
                               threads=int(s["model_threads"]))
-    detector = _defaults(DETECTOR_SCHEMA, dict(s.get("detector") or {}), "detector.")
-    tracker = _defaults(TRACKER_SCHEMA, dict(s.get("tracker") or {}), "tracker.")
     try:
-        estimator = BarrelEstimator(layout, model, reference=str(s["reference"]), detector=detector,
-                                    tracker=tracker)
-        backoff = Backoff(initial_s=float(s["backoff_initial_s"]), cap_s=float(s["backoff_cap_s"]))
+        estimator = BarrelEstimator(layout, model, reference=str(s["reference"]),
+                                    detector=defaults(DETECTOR_SCHEMA, s.get("detector"), "detector."),
+                                    tracker=defaults(TRACKER_SCHEMA, s.get("tracker"), "tracker."))
     except ValueError as e:
         raise DriverError(str(e)) from None
     source = s["source"]
     if source == "sim":
-        try:
-            scene = Scene.load(s["scene"] or demo_scene_path())
-            render = RenderSettings(**_defaults(RENDER_SCHEMA, dict(s.get("render") or {}), "render."))
-        except (SceneError, ValueError) as e:
-            raise DriverError(f"scene/render: {e}") from None
-        fps, realtime = float(s["fps"]), bool(s["realtime"])
-        if not fps > 0:
-            raise DriverError(f"fps: must be positive, got {fps}")
+        render = section(RenderSettings, RENDER_SCHEMA, s.get("render"), "render")
 
-        def open_source():
+        def simulated(scene, fps, realtime):
             return SimulatedCameras(BarrelSimulator(layout, scene, render), fps, realtime=realtime)
 
-        name = f"simulator ({scene.name})"
+        open_source, name = simulator_source(s, demo_scene_path(), simulated)
     else:
         if not (isinstance(source, list | tuple) and len(source) == 2):
             raise DriverError(f"source: \"sim\" or [bottom, top] camera sources, got {source!r}")
@@ -219,5 +162,5 @@ def open_barrel(device_id: str, settings: dict[str, Any], *, max_frames: int | N
             return CameraPair(specs)
 
         name = f"cameras {list(specs)!r}"
-    return BarrelDriver(description, estimator, open_source, source_name=name, backoff=backoff,
+    return BarrelDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
                         max_frames=max_frames)

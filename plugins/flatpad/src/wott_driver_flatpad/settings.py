@@ -10,9 +10,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from wott_hub.drivers.backoff import Backoff
+from wott_vision.schema import BACKOFF_PROPERTIES, RENDER_PROPERTIES, number, simulator_properties, table
+from wott_vision.settings import backoff, check_material, defaults, section, simulator_source
+
 from wott_hub.drivers.base import DriverError
-from wott_hub.sim.scene import Scene, SceneError
 from wott_hub.tactile import MATERIALS, CoordinateFrame, DeviceDescription, SkinShape
 
 from .camera import PadOptics
@@ -29,43 +30,25 @@ def demo_scene_path() -> Path:
     return Path(str(resources.files("wott_driver_flatpad") / "scenes" / "demo.toml"))
 
 
-def _num(default: float, description: str, **extra: Any) -> dict[str, Any]:
-    return {"type": "number", "default": default, "description": description, **extra}
+OPTICS_SCHEMA = table("Pinhole camera under the gel (docs/flat-pad.md, camera model).", {
+    "width": {"type": "integer", "minimum": 16, "default": 640, "description": "Image width, px."},
+    "height": {"type": "integer", "minimum": 16, "default": 480, "description": "Image height, px."},
+    "focal_px": number(480.0, "Focal length, px.", exclusiveMinimum=0),
+    "air_gap_mm": number(20.0, "Lens to acrylic, mm.", exclusiveMinimum=0),
+    "acrylic_mm": number(3.0, "Acrylic plate thickness, mm.", minimum=0),
+    "acrylic_n": number(1.49, "Refractive index of the acrylic.", minimum=1),
+    "gel_n": number(1.41, "Refractive index of the gel.", minimum=1),
+    "principal_px": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+                     "description": "Principal point (cx, cy), px; default the image centre."},
+    "centre_mm": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+                  "description": "Device (x, y) on the optical axis, mm; default the pad centre."},
+})
 
-
-OPTICS_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "description": "Pinhole camera under the gel (docs/flat-pad.md, camera model).",
-    "default": {},
-    "additionalProperties": False,
-    "properties": {
-        "width": {"type": "integer", "minimum": 16, "default": 640, "description": "Image width, px."},
-        "height": {"type": "integer", "minimum": 16, "default": 480, "description": "Image height, px."},
-        "focal_px": _num(480.0, "Focal length, px.", exclusiveMinimum=0),
-        "air_gap_mm": _num(20.0, "Lens to acrylic, mm.", exclusiveMinimum=0),
-        "acrylic_mm": _num(3.0, "Acrylic plate thickness, mm.", minimum=0),
-        "acrylic_n": _num(1.49, "Refractive index of the acrylic.", minimum=1),
-        "gel_n": _num(1.41, "Refractive index of the gel.", minimum=1),
-        "principal_px": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
-                         "description": "Principal point (cx, cy), px; default the image centre."},
-        "centre_mm": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
-                      "description": "Device (x, y) on the optical axis, mm; default the pad centre."},
-    },
-}
-
-RENDER_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "description": "Simulator image chain (source = \"sim\" only).",
-    "default": {},
-    "additionalProperties": False,
-    "properties": {
-        "blur_sigma": _num(1.0, "Gaussian lens blur, px.", minimum=0),
-        "noise_std": _num(2.0, "Sensor noise, grey levels.", minimum=0),
-        "seed": {"type": "integer", "default": 0, "description": "Noise seed."},
-        "refine": {"type": "integer", "minimum": 1, "maximum": 8, "default": 2,
-                   "description": "Ground-truth marker-area grid: pitch / refine."},
-    },
-}
+RENDER_SCHEMA = table("Simulator image chain (source = \"sim\" only).", {
+    **RENDER_PROPERTIES,
+    "refine": {"type": "integer", "minimum": 1, "maximum": 8, "default": 2,
+               "description": "Ground-truth marker-area grid: pitch / refine."},
+})
 
 SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -78,50 +61,36 @@ SCHEMA: dict[str, Any] = {
                  "description": "Marker rows (along device y)."},
         "cols": {"type": "integer", "minimum": GRID_MIN, "maximum": GRID_MAX, "default": 16,
                  "description": "Marker columns (along device x)."},
-        "pitch_mm": _num(1.5, "Marker spacing, mm.", exclusiveMinimum=0),
-        "marker_radius_mm": _num(0.35, "Printed marker radius, mm (< 0.3 pitch).", exclusiveMinimum=0),
-        "thickness_mm": _num(4.0, "Gel thickness, mm.", exclusiveMinimum=0),
+        "pitch_mm": number(1.5, "Marker spacing, mm.", exclusiveMinimum=0),
+        "marker_radius_mm": number(0.35, "Printed marker radius, mm (< 0.3 pitch).", exclusiveMinimum=0),
+        "thickness_mm": number(4.0, "Gel thickness, mm.", exclusiveMinimum=0),
         "material": {"type": "string", "enum": sorted(MATERIALS), "default": "ecoflex-00-50",
                      "description": "Gel material."},
-        "epsilon_mm": _num(0.1, "Displacement above which a node counts as deformed, mm (above the "
-                           "~0.07 mm image-noise floor at rest, docs/flat-pad.md).",
-                           exclusiveMinimum=0),
+        "epsilon_mm": number(0.1, "Displacement above which a node counts as deformed, mm (above the "
+                             "~0.07 mm image-noise floor at rest, docs/flat-pad.md).",
+                             exclusiveMinimum=0),
         "source": {"oneOf": [{"type": "integer", "minimum": 0}, {"type": "string", "minLength": 1}],
                    "default": "sim",
                    "description": "\"sim\" (simulator), a camera index, or a video file / image "
                                   "sequence pattern / stream URL."},
-        "scene": {"type": "string", "default": "",
-                  "description": "Scene TOML the simulator plays; empty: the bundled demo scene."},
-        "fps": _num(60.0, "Simulator frame rate, frames/s.", exclusiveMinimum=0),
-        "realtime": {"type": "boolean", "default": True,
-                     "description": "Simulator paces frames like a camera (false: as fast as read)."},
+        **simulator_properties(60.0),
         "depth_model": {"type": "string", "default": "physical",
                         "description": "\"physical\" (ideal optics), \"calibrate\" (fit on simulated "
                                        "presses at start-up) or a JSON file written by DepthModel.save."},
         "parallax": {"type": "boolean", "default": True,
                      "description": "Correct marker areas for the foreshortening of a sloped gel seen "
                                     "off-axis (docs/flat-pad.md); false: area ratio read as depth alone."},
-        "backoff_initial_s": _num(0.05, "First reconnect delay, s.", exclusiveMinimum=0),
-        "backoff_cap_s": _num(5.0, "Longest reconnect delay, s.", exclusiveMinimum=0),
+        **BACKOFF_PROPERTIES,
         "optics": OPTICS_SCHEMA,
         "render": RENDER_SCHEMA,
     },
 }
 
 
-def _defaults(schema: dict[str, Any], given: dict[str, Any]) -> dict[str, Any]:
-    out = {k: v["default"] for k, v in schema["properties"].items() if "default" in v}
-    out.update(given)
-    unknown = sorted(set(given) - set(schema["properties"]))
-    if unknown:
-        raise DriverError(f"unknown setting(s) {', '.join(unknown)}")
-    return out
-
-
 def layout_from(settings: dict[str, Any]) -> PadLayout:
-    s = _defaults(SCHEMA, settings)
+    s = defaults(SCHEMA, settings)
     try:
-        o = _defaults(OPTICS_SCHEMA, dict(s.get("optics") or {}))
+        o = defaults(OPTICS_SCHEMA, s.get("optics"), "optics.")
         for key in ("principal_px", "centre_mm"):
             if key in o:
                 o[key] = tuple(float(v) for v in o[key])
@@ -133,7 +102,7 @@ def layout_from(settings: dict[str, Any]) -> PadLayout:
 
 
 def describe(device_id: str, settings: dict[str, Any], layout: PadLayout) -> DeviceDescription:
-    s = _defaults(SCHEMA, settings)
+    s = defaults(SCHEMA, settings)
     span_x = (layout.cols - 1) * layout.pitch_mm
     span_y = (layout.rows - 1) * layout.pitch_mm
     return DeviceDescription(
@@ -153,15 +122,11 @@ def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None
     from .estimator import PadEstimator
     from .simulator import PadSimulator, SimulatedCamera
 
-    s = _defaults(SCHEMA, settings)
-    if s["material"] not in MATERIALS:
-        raise DriverError(f"material: {s['material']!r} is not one of {', '.join(sorted(MATERIALS))}")
+    s = defaults(SCHEMA, settings)
+    check_material(s)
     layout = layout_from(settings)
     description = describe(device_id, settings, layout)
-    try:
-        render = RenderSettings(**_defaults(RENDER_SCHEMA, dict(s.get("render") or {})))
-    except TypeError as e:
-        raise DriverError(f"render: {e}") from None
+    render = section(RenderSettings, RENDER_SCHEMA, s.get("render"), "render")
     spec = str(s["depth_model"])
     estimator = PadEstimator(layout, None if spec == "calibrate" else _depth_model(spec, layout),
                              parallax=bool(s["parallax"]))
@@ -171,24 +136,12 @@ def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None
             from .calibration import calibrate
 
             estimator.depth_model = calibrate(layout, render, parallax=estimator.solver.parallax)
-    try:
-        backoff = Backoff(initial_s=float(s["backoff_initial_s"]), cap_s=float(s["backoff_cap_s"]))
-    except ValueError as e:
-        raise DriverError(f"backoff_initial_s/backoff_cap_s: {e}") from None
     source = s["source"]
     if source == "sim":
-        try:
-            scene = Scene.load(s["scene"] or demo_scene_path())
-        except SceneError as e:
-            raise DriverError(f"scene: {e}") from None
-        fps, realtime = float(s["fps"]), bool(s["realtime"])
-        if not fps > 0:
-            raise DriverError(f"fps: must be positive, got {fps}")
-
-        def open_source():
+        def simulated(scene, fps, realtime):
             return SimulatedCamera(PadSimulator(layout, scene, render), fps, realtime=realtime)
 
-        name = f"simulator ({scene.name})"
+        open_source, name = simulator_source(s, demo_scene_path(), simulated)
     else:
         def open_source():
             from wott_vision.camera import open_source as open_camera
@@ -196,7 +149,7 @@ def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None
             return open_camera(source)
 
         name = f"camera {source!r}"
-    return FlatPadDriver(description, estimator, open_source, source_name=name, backoff=backoff,
+    return FlatPadDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
                          max_frames=max_frames, prepare=prepare)
 
 

@@ -4,26 +4,26 @@ Every implicit step, the quasi-static solve and the explicit contact
 projection reduce to the same problem: minimise ½xᵀAx − rᵀx with A symmetric
 positive definite, subject to the contact rows of each press — for each probe
 p in contact, a·u(p) ≥ d − φ_p, plus two tangential equalities for a sticking
-press — where u(p) = Σ_j w_pj x_j interpolates the probe's nodes. A
+press — where u(p) = Σ_j w_pj x_j interpolates the probe's nodes. An
 active-set loop picks the probes in contact: solve as if the active rows were
 equalities, then keep exactly the probes that still penetrate (an indenter
 never pulls), repeat. Warm-started from the previous step's set it usually
 needs one to three iterations.
 
 Each equality solve uses the Schur complement on the contact rows,
-x = A⁻¹r + Zλ with Z = A⁻¹Bᵀ, (BZ + εD)λ = g − BA⁻¹r, so A is never
-refactorised: the columns of A⁻¹ under each contact node are computed once and
-kept (an LRU cache bounded in bytes). The small εD makes the projection a
-penalty: each probe is held by a spring 1000 times stiffer than the skin's own
+x = A⁻¹r + A⁻¹Bᵀλ, (BA⁻¹Bᵀ + εD)λ = g − BA⁻¹r, so A is never refactorised:
+the three columns of A⁻¹ under each contact node are computed once and kept
+(an LRU cache bounded in bytes). The small εD makes the projection a penalty:
+each probe is held by a spring 1000 times stiffer than the skin's own
 diagonal stiffness there (ε = 10⁻³), which changes the answer by about 0.1 %
-and keeps the system regular when several probes on one face push on the same
-three nodes. With it the loop is a semismooth Newton method on a convex,
-piecewise-quadratic energy, globalised by backtracking on that energy.
-A force-controlled press adds its depth as one more unknown and Σλ = F as one
-more equation. When Z would not fit the memory budget (a contact covering most
-of a big skin), each iteration factorises the bordered KKT matrix instead. For
-a diagonal A (the explicit integrator's projection, A = M/h²) Z is sparse and
-nothing is cached.
+and keeps the system regular when several probes on one face push on the
+same three nodes. With it the loop is a semismooth Newton method on a convex,
+piecewise-quadratic energy, globalised by backtracking on that energy. A
+force-controlled press adds its depth as one more unknown and Σλ = F as one
+more equation. When the columns would not fit the memory budget (a contact
+covering most of a big skin), each iteration factorises the bordered KKT
+matrix instead. For a diagonal A (the explicit integrator's projection,
+A = M/h²) nothing needs caching.
 
 The multipliers λ are the contact forces on the probes in newtons.
 """

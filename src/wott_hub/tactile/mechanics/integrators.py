@@ -3,9 +3,11 @@
 * ``SymplecticEuler`` — explicit: v += h M⁻¹(f − Ku − Cv), then u += h v.
   First order, cheap per step (one sparse product), but only stable below
   ``model.stable_step``; it cuts a long step into substeps at that size, or
-  refuses with a ``StabilityError`` that names it. Contact is a local
-  projection: with a lumped mass, moving a node back onto the indenter and
-  giving it the indenter's velocity is the exact constraint impulse.
+  refuses with a ``StabilityError`` that names it. Contact moves the trial
+  position to the nearest admissible one in the mass norm and sets the
+  velocity to match: the constraint impulse. With a lumped mass that is a
+  local projection (a face probe couples only its three nodes), solved by
+  the same contact solver with the diagonal matrix M/h².
 * ``BackwardEuler`` — implicit, first order, L-stable: energy can only decrease
   (for a linear skin, E(n+1) − E(n) = −hvᵀCv − ½ΔvᵀMΔv − ½ΔuᵀKΔu ≤ 0), at any
   step and stiffness. One linear system per step with the matrix
@@ -64,7 +66,7 @@ class State:
     f_contact: np.ndarray  # (ndof,) contact force on each dof, N
     forces: tuple[np.ndarray, ...] = ()  # per press, total contact force on the skin (3,), N
     depths: tuple[float, ...] = ()  # per press, tip depth along its axis, mm
-    active: tuple[np.ndarray, ...] = ()  # per press, node slots in contact
+    active: tuple[np.ndarray, ...] = ()  # per press, contact probes (model.probes indices)
     a: np.ndarray | None = field(default=None)  # acceleration (kept by the trapezoidal rule)
 
     @classmethod

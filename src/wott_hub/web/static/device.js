@@ -15,6 +15,7 @@ const state = (window.twin = {
   page: "device", ready: false, thing: null, title: null, mode: "live", nodes: 0, cells: 0,
   packets: 0, frames: 0, last: null, applied: null, drawn: null, onsets: [], seqs: [], stream: null, reconnects: 0,
   action: null, actions: [], contacts: 0, delays: {net: [], draw: [], e2e: []}, errors: [], cmax: 1,
+  freeze: false, // hold the picture (events are still received and counted)
 });
 
 const $ = (id) => document.getElementById(id);
@@ -103,11 +104,19 @@ async function drawMesh(skin) {
     type: "scatter3d", mode: "markers", x: [], y: [], z: [], text: [], name: "contacts",
     marker: {size: 7, color: "#111", symbol: "diamond"}, hovertemplate: "contact<br>%{text}<extra></extra>",
   };
-  const axis = (t) => ({title: {text: t}, showbackground: false, gridcolor: "#e3e7eb", zeroline: false});
+  const ranges = skin.ranges();
+  const span = Math.max(...ranges.map(([a, b]) => b - a));
+  const axis = (t, r) => ({title: {text: t}, range: r, autorange: false, showbackground: false,
+    gridcolor: "#e3e7eb", zeroline: false});
   const layout = {
     margin: {l: 0, r: 0, t: 0, b: 0}, showlegend: false, paper_bgcolor: "#fff", uirevision: "keep",
-    scene: {aspectmode: "data", xaxis: axis("x mm"), yaxis: axis("y mm"), zaxis: axis("z mm"),
-      camera: {eye: {x: 1.5, y: -1.5, z: 0.9}}},
+    scene: {
+      xaxis: axis("x mm", ranges[0]), yaxis: axis("y mm", ranges[1]), zaxis: axis("z mm", ranges[2]),
+      aspectmode: "manual", // true proportions (fixed ranges, so "data" would not apply)
+      aspectratio: {x: (ranges[0][1] - ranges[0][0]) / span, y: (ranges[1][1] - ranges[1][0]) / span,
+        z: (ranges[2][1] - ranges[2][0]) / span},
+      camera: {eye: {x: 1.2, y: -1.2, z: 0.7}},
+    },
   };
   // plotly renders 3D at twice the screen's resolution by default: four times the pixels to
   // fill at every update for nothing on a standard display
@@ -126,7 +135,7 @@ function onPacket(packet, id) {
   state.packets++;
   state.last = {seq: Number(id), n: packet.numOfDeformedNodes, max, stamp: stampMs, at: t};
   if (max > 0 && (!prev || prev.max === 0)) {
-    state.onsets.push({seq: Number(id), stamp: stampMs, received: t, drawn: null});
+    state.onsets.push({seq: Number(id), stamp: stampMs, received: t, applied: null, drawn: null});
     if (state.onsets.length > 50) state.onsets.shift();
   }
   if (state.mode === "live") sample("net", t - stampMs);
@@ -155,6 +164,7 @@ function setContacts(value) {
 }
 
 function streamState(s, stream) {
+  state.streamState = s;
   state.reconnects = view ? view.streams.reduce((n, x) => n + x.reconnects, 0) : stream.reconnects;
   const el = $("stream");
   el.textContent = s;
@@ -172,7 +182,7 @@ function sample(kind, ms) {
 
 function frame() {
   requestAnimationFrame(frame);
-  if (!view || busy) return;
+  if (!view || busy || state.freeze) return;
   if (pendingContacts) {
     setContacts(pendingContacts);
     pendingContacts = null;
@@ -185,6 +195,7 @@ function frame() {
   skin.apply(job.packet, scale);
   if (job.max > state.cmax) state.cmax = Math.ceil(job.max * 2) / 2;
   state.applied = {seq: job.seq, max: job.max, at: now()};
+  for (const o of state.onsets) if (o.applied === null && o.seq <= job.seq) o.applied = state.applied.at;
   Plotly.restyle(plot, {
     x: [Array.from(skin.x)], y: [Array.from(skin.y)], z: [Array.from(skin.z)],
     intensity: [Array.from(skin.intensity)], cmax: [state.cmax],
@@ -231,6 +242,7 @@ function panels() {
 async function main() {
   const tdUrl = new URLSearchParams(location.search).get("td");
   if (!tdUrl) throw new Error("no Thing given: open this page from the fleet page (?td=<TD URL>)");
+  $("freeze").onchange = (e) => (state.freeze = e.target.checked);
   $("exaggerate").onchange = (e) => {
     scale = Number(e.target.value);
     if (view && state.last) pending = pending || {packet: lastPacket(), seq: state.last.seq, at: now(),

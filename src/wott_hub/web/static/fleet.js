@@ -14,6 +14,7 @@ const subs = new Map(); // TD id -> subscription to actionDetection
 let hub = null; // {td, url}
 let hubDevices = [];
 let health = null;
+let healthAt = 0; // when ``health`` was read: uptime goes on from there
 let lastCounters = null;
 let renderQueued = false;
 let reloadTimer = null;
@@ -41,13 +42,15 @@ async function load() {
     $("hub-name").textContent = hub.td.title;
     hubDevices = await readProperty(hub.td, "devices");
     health = await readProperty(hub.td, "health");
+    healthAt = now();
   }
   const seen = new Set();
   for (const {td, url} of found.things) {
     seen.add(td.id);
     const key = hubKeyOf(td, hubDevices);
     const row = state.devices[td.id] || {lastAction: null, lastActionAt: null, rate: null};
-    Object.assign(row, {id: td.id, key, title: td.title || td.id, family: td["tac:family"] || "", url});
+    Object.assign(row, {id: td.id, key, title: td.title || td.id, family: td["tac:family"] || "", url,
+      events: Object.keys(td.events || {})});
     state.devices[td.id] = row;
     if (!subs.has(td.id) && td.events && td.events.actionDetection) {
       subs.set(td.id, subscribeEvent(td, "actionDetection", (action) => {
@@ -76,7 +79,7 @@ async function pollCounters() {
       const dt = (t - lastCounters.t) / 1000;
       for (const row of Object.values(state.devices)) {
         const a = row.key && c.things[row.key], b = row.key && lastCounters.c.things[row.key];
-        row.rate = a && b ? (events(a) - events(b)) / dt : null;
+        row.rate = a && b ? (events(a, row.events) - events(b, row.events)) / dt : null;
       }
     }
     lastCounters = {c, t};
@@ -86,10 +89,10 @@ async function pollCounters() {
   }
 }
 
-// records per event name minus the property changes (contactInformation) of that Thing
-function events(thing) {
+// events published so far (the counters also count property changes: leave those out)
+function events(thing, names) {
   let n = 0;
-  for (const [name, count] of Object.entries(thing.byName || {})) if (name !== "contactInformation") n += count;
+  for (const name of names) n += (thing.byName || {})[name] || 0;
   return n;
 }
 
@@ -106,7 +109,7 @@ function draw() {
   if (health) {
     state.hubState = health.state;
     setBadge($("hub-state"), health.state);
-    $("hub-uptime").textContent = `up ${fmtDuration(health.uptimeSeconds)}`;
+    $("hub-uptime").textContent = `up ${fmtDuration(health.uptimeSeconds + (now() - healthAt) / 1000)}`;
   }
   const body = document.querySelector("#fleet tbody");
   const rows = Object.values(state.devices).sort((a, b) => a.title.localeCompare(b.title));
@@ -159,6 +162,7 @@ async function main() {
   if (hub) {
     observeProperty(hub.td, "health", (value) => {
       health = value;
+      healthAt = now();
       render();
     });
   }

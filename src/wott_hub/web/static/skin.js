@@ -70,14 +70,26 @@ export class Skin {
   }
 
   _size() {
-    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
     for (let v = 0; v < this.n; v++) {
       for (let d = 0; d < 3; d++) {
         lo[d] = Math.min(lo[d], this.rest[3 * v + d]);
         hi[d] = Math.max(hi[d], this.rest[3 * v + d]);
       }
     }
+    this.lo = lo;
+    this.hi = hi;
     return this.n ? Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) : 0;
+  }
+
+  // Fixed axis ranges around the rest shape: each at least 30 % of the largest extent, so a flat
+  // pad keeps room for its dents, and the view does not jump as the skin deforms.
+  ranges() {
+    return [0, 1, 2].map((d) => {
+      const c = (this.lo[d] + this.hi[d]) / 2;
+      const half = 1.05 * Math.max((this.hi[d] - this.lo[d]) / 2, 0.15 * this.size, 1e-3);
+      return [c - half, c + half];
+    });
   }
 
   // Positions and per-vertex intensity for one packet; ``scale`` exaggerates the displacement.

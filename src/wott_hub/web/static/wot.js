@@ -133,8 +133,9 @@ export class SseStream {
 // WebSockets do not count against the browser's six HTTP connections per host, which a
 // fleet page with one SSE stream per device would exhaust.
 export class WsSubscription {
-  constructor(url, name, onData, {property = false, onState = null} = {}) {
+  constructor(url, name, onData, {property = false, onState = null, onOpen = null} = {}) {
     this.url = url;
+    this.onOpen = onOpen;
     this.name = name;
     this.onData = onData;
     this.property = property;
@@ -154,6 +155,7 @@ export class WsSubscription {
       const method = this.property ? "on_property_change" : "on_event";
       ws.send(JSON.stringify({jsonrpc: "2.0", method, params: {name: this.name}, id: 1}));
       this._set("open");
+      if (this.onOpen) this.onOpen();
     };
     ws.onmessage = (m) => {
       const msg = JSON.parse(m.data);
@@ -210,11 +212,20 @@ export function subscribeEvents(td, names, onEvent, {after = null, onState = nul
   });
 }
 
-export function observeProperty(td, name, onValue, {onState = null} = {}) {
+// Observe a property: over the WebSocket form when the TD has one (it holds none of the
+// browser's six HTTP connections per host; see WsSubscription), else over SSE.
+export function observeProperty(td, name, onValue, {prefer = "ws", onState = null} = {}) {
   const aff = (td.properties || {})[name];
-  const f = aff && findForm(aff.forms, "observeproperty", "sse");
-  if (!f) return null;
-  return new SseStream(href(td, f), [name], (_n, value) => onValue(value), {onState});
+  if (!aff) return null;
+  const ws = findForm(aff.forms, "observeproperty", "ws");
+  const sse = findForm(aff.forms, "observeproperty", "sse");
+  if (ws && (prefer === "ws" || !sse)) {
+    // no resume over wotpy's WebSocket: read the value again whenever the socket (re)opens
+    const reread = () => readProperty(td, name).then(onValue, () => {});
+    return new WsSubscription(href(td, ws), name, onValue, {property: true, onState, onOpen: reread});
+  }
+  if (!sse) return null;
+  return new SseStream(href(td, sse), [name], (_n, value) => onValue(value), {onState});
 }
 
 // --- discovery ---------------------------------------------------------------------

@@ -1,0 +1,77 @@
+"""Reading the device settings the camera-based families share (their schema: ``wott_vision.schema``).
+
+The barrel skin and the flat pad both take a simulator or real cameras, pace
+reconnects the same way and nest sub-tables (``render``, ...) with their own
+defaults; reading those is the same code for both. Errors are ``DriverError``s
+naming the setting at fault (the plugin hook adds the device and family).
+Nothing here imports cv2: the reader a family makes is opened by its driver.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from wott_hub.drivers.backoff import Backoff
+from wott_hub.drivers.base import DriverError
+from wott_hub.sim.scene import Scene, SceneError
+from wott_hub.tactile import MATERIALS
+
+from .driver import FrameReader
+
+__all__ = ["backoff", "check_material", "defaults", "section", "simulator_source"]
+
+
+def defaults(schema: dict[str, Any], given: dict[str, Any] | None, where: str = "") -> dict[str, Any]:
+    """``given`` completed with the schema's defaults; an unknown key is an error naming it.
+
+    The registry checks the top level against the schema before a plugin sees it, but a family
+    can be opened directly (tests, scripts), and nested tables get their defaults only here.
+    """
+    given = dict(given or {})
+    unknown = sorted(set(given) - set(schema["properties"]))
+    if unknown:
+        raise DriverError(f"unknown setting(s) {', '.join(where + u for u in unknown)}")
+    out = {k: v["default"] for k, v in schema["properties"].items() if "default" in v}
+    out.update(given)
+    return out
+
+
+def section(factory: Callable[..., Any], schema: dict[str, Any], given: dict[str, Any] | None, key: str):
+    """``factory(**table)`` for the sub-table ``key`` with its defaults; errors name ``key``."""
+    table = defaults(schema, given, f"{key}.")
+    try:
+        return factory(**table)
+    except (TypeError, ValueError) as e:
+        raise DriverError(f"{key}: {e}") from None
+
+
+def check_material(s: dict[str, Any]) -> None:
+    if s["material"] not in MATERIALS:
+        raise DriverError(f"material: {s['material']!r} is not one of {', '.join(sorted(MATERIALS))}")
+
+
+def backoff(s: dict[str, Any]) -> Backoff:
+    try:
+        return Backoff(initial_s=float(s["backoff_initial_s"]), cap_s=float(s["backoff_cap_s"]))
+    except ValueError as e:
+        raise DriverError(f"backoff_initial_s/backoff_cap_s: {e}") from None
+
+
+def simulator_source(
+    s: dict[str, Any], demo_scene: Path, make_reader: Callable[[Scene, float, bool], FrameReader],
+) -> tuple[Callable[[], FrameReader], str]:
+    """(``open_source``, its name) for ``source = "sim"``: ``make_reader(scene, fps, realtime)``.
+
+    The scene is loaded now, so a bad one is refused when the device opens; each (re)open
+    starts a fresh reader from the scene's beginning.
+    """
+    try:
+        scene = Scene.load(s["scene"] or demo_scene)
+    except SceneError as e:
+        raise DriverError(f"scene: {e}") from None
+    fps, realtime = float(s["fps"]), bool(s["realtime"])
+    if not fps > 0:
+        raise DriverError(f"fps: must be positive, got {fps}")
+    return (lambda: make_reader(scene, fps, realtime)), f"simulator ({scene.name})"

@@ -1,0 +1,278 @@
+"""The hub's Thing Description Directory and its registrations into other directories.
+
+Every Thing the hub serves (devices, the hub Thing, replay Things, adopted
+WoT devices) is put into the embedded directory when it is exposed and
+deleted when it is removed, in the order the hub did it (one worker per
+directory, so a put never overtakes the delete before it). The same changes go
+to each ``register_to`` directory through a ``Registrar``, with a ttl it
+refreshes every ttl/3: a hub that dies leaves its Things there at most ttl
+seconds, one that stops cleanly deletes them.
+
+The embedded directory lives in the hub's database (tables ``tdd_things`` and
+``tdd_events``, created by the hub's Alembic revision 0002, never by
+``create_all``), and is mounted at the host root (``/things``,
+``/search/jsonpath``, ``/events``, ``/.well-known/wot``). Its routes are
+mounted when the hub is built and the directory opens with the database, a
+moment after the TDs are served: a request arriving in between waits for it,
+as the hub's own stream requests wait for the history.
+
+Writes by other clients: with ``[directory] token`` they need that bearer
+token; without one, clients on loopback write freely when the hub listens on
+loopback only (the demo), and nobody else can write. The hub itself writes
+in-process and needs neither.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Awaitable, Callable
+from typing import TYPE_CHECKING, Any
+
+from .config import DirectoryConfig
+
+if TYPE_CHECKING:
+    from wott_directory import Directory, Registrar
+
+    from wott_hub.hub import Hub
+
+__all__ = ["HubDirectory", "OWN_ID_PREFIX"]
+
+log = logging.getLogger("wott_hub.network")
+
+OWN_ID_PREFIX = "urn:wott-hub:"
+"""Ids of the TDs a hub builds (devices, the hub Thing, replays): stale ones of a previous run,
+registered without a ttl, are deleted from the embedded directory when the hub starts."""
+
+Op = Callable[[], Awaitable[Any]]
+
+
+class _Worker:
+    """Runs one directory's writes one at a time, in the order they were asked for."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.queue: asyncio.Queue[Op | None] = asyncio.Queue()
+        self.task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        self.task = asyncio.create_task(self._run(), name=f"directory-writes:{self.name}")
+
+    def submit(self, op: Op) -> None:
+        self.queue.put_nowait(op)
+
+    async def _run(self) -> None:
+        while (op := await self.queue.get()) is not None:
+            try:
+                await op()
+            except Exception:  # one refused TD must not stop the others
+                log.exception("directory %s: write failed", self.name)
+            finally:
+                self.queue.task_done()
+
+    async def drain(self) -> None:
+        """Wait until every write asked for so far is done."""
+        if self.task is not None and not self.task.done():
+            await self.queue.join()
+
+    async def stop(self) -> None:
+        if self.task is None:
+            return
+        self.queue.put_nowait(None)
+        with contextlib.suppress(asyncio.CancelledError):
+            await self.task
+        self.task = None
+
+
+def _waiting_handler(cls: type, holder: HubDirectory) -> type:
+    """``cls`` (a wott_directory handler) waiting for the directory to be open before it answers."""
+
+    class Waiting(cls):  # type: ignore[misc, valid-type]
+        def initialize(self, directory: Any = None) -> None:
+            self.directory = holder.directory  # type: ignore[assignment]
+
+        async def prepare(self) -> None:
+            if not holder.ready.is_set():
+                await holder.ready.wait()
+            directory = holder.directory
+            if directory is None or not directory.started:
+                from wott_directory import DirectoryError
+
+                raise DirectoryError(503, "The hub's directory is not available (see the hub's log)")
+            self.directory = directory
+            result = super().prepare()
+            if result is not None:
+                await result
+
+    Waiting.__name__ = Waiting.__qualname__ = f"Hub{cls.__name__}"
+    return Waiting
+
+
+class HubDirectory:
+    def __init__(self, hub: Hub, cfg: DirectoryConfig) -> None:
+        self.hub = hub
+        self.cfg = cfg
+        self.directory: Directory | None = None
+        self.ready = asyncio.Event()
+        self.registrars: list[Registrar] = []
+        self._workers: list[tuple[_Worker, Any]] = []  # (worker, the embedded Directory or a Registrar)
+        self.started = False
+        if cfg.enabled:
+            from wott_directory import directory_handlers
+
+            routes = directory_handlers(None, prefix="")  # type: ignore[arg-type]  # the route table
+            hub.add_handlers([(pattern, _waiting_handler(cls, self), {}) for pattern, cls, _ in routes])
+
+    @property
+    def url(self) -> str | None:
+        """The directory's base URL (``/things`` is under it), or None when it is off."""
+        return f"{self.hub.http_url}/" if self.cfg.enabled else None
+
+    # --- lifecycle ------------------------------------------------------------------
+
+    async def start(self) -> None:
+        try:
+            if self.cfg.enabled:
+                await self._open_embedded()
+            for reg in self.cfg.register_to:
+                self._add_registrar(reg.url, reg.token)
+            for thing in list(self.hub.server.things):
+                self.exposed(thing.td)
+            if self.directory is not None:  # a client waiting for /things gets the whole fleet
+                await self._workers[0][0].drain()
+        finally:
+            self.ready.set()  # requests waiting for a directory that failed to open get a 503
+        for registrar in self.registrars:
+            registrar.start()
+        self.started = True
+
+    async def _open_embedded(self) -> None:
+        from wott_directory import Directory, DirectorySettings
+        from wott_directory.settings import is_loopback
+
+        cfg, hub = self.cfg, self.hub
+        open_writes = cfg.token is None and is_loopback(hub.config.host)
+        if cfg.token is None and not open_writes:
+            log.warning("the hub's directory accepts no registrations from others: it listens on %s and "
+                        "[directory] token is not set", hub.config.host)
+        settings = DirectorySettings(base_url=f"{hub.http_url}/", title=f"{hub.config.name} directory",
+                                     token=cfg.token, open_writes=open_writes,
+                                     protect_reads=cfg.protect_reads)
+        # the hub's database, migrated by the hub (revision 0002 has the directory's tables);
+        # without history, a directory in memory that lives as long as the hub
+        engine = hub.engine
+        directory = Directory(settings, engine if engine is not None else "sqlite://",
+                              create_tables=engine is None)
+        try:
+            await directory.start()
+        except Exception:
+            log.exception("the hub's directory could not be opened; /things answers 503")
+            await directory.stop()
+            return
+        self.directory = directory
+        await self._forget_stale()
+        worker = _Worker("embedded")
+        worker.start()
+        self._workers.append((worker, directory))
+
+    async def _forget_stale(self) -> None:
+        """Delete the TDs a previous run of this hub put and this one does not serve (a device
+        removed from the config, a hub renamed): ids of the hub's own scheme without a ttl.
+        Other producers register with a ttl (``Registrar``) and are left to expire."""
+        served = {t.td.get("id") for t in self.hub.server.things}
+        directory = self.directory
+        assert directory is not None
+        stale = []
+        offset = 0
+        while True:
+            page, total = directory.page(offset, 1000)
+            for td in page:
+                tid = td.get("id", "")
+                if (tid.startswith(OWN_ID_PREFIX) and tid not in served
+                        and "expires" not in (td.get("registration") or {})):
+                    stale.append(tid)
+            offset += len(page)
+            if not page or offset >= total:
+                break
+        for tid in stale:
+            with contextlib.suppress(Exception):
+                await directory.delete(tid)
+        if stale:
+            log.info("removed %d TD(s) of a previous run from the directory: %s", len(stale),
+                     ", ".join(stale))
+
+    def _add_registrar(self, url: str, token: str | None) -> None:
+        from wott_directory import DirectoryClient, Registrar
+
+        registrar = Registrar(DirectoryClient(url, token=token), ttl=self.cfg.ttl_s)
+        self.registrars.append(registrar)
+        worker = _Worker(url)
+        worker.start()
+        self._workers.append((worker, registrar))
+
+    async def drain(self) -> None:
+        """Wait until the directories have every change made so far (tests, orderly shutdown)."""
+        for worker, _ in self._workers:
+            await worker.drain()
+
+    async def stop(self) -> None:
+        """Stop writing; delete the hub's Things from the ``register_to`` directories (a clean stop:
+        they are gone now, not in ttl seconds); close the embedded directory (its streams end)."""
+        self.started = False
+        for worker, _ in self._workers:
+            await worker.stop()
+        for registrar in self.registrars:
+            with contextlib.suppress(Exception):
+                await registrar.stop(unregister=True)
+            registrar.client.close()
+        if self.directory is not None:
+            await self.directory.stop()
+        self._workers.clear()
+        self.registrars.clear()
+
+    # --- the hub's Things -------------------------------------------------------------
+
+    def exposed(self, td: dict[str, Any]) -> None:
+        """The hub serves ``td`` (a new Thing, or a new TD of one): put it everywhere."""
+        tid = td.get("id")
+        if not isinstance(tid, str):
+            return
+        for worker, target in self._workers:
+            worker.submit(self._put_op(target, tid, td))
+
+    def removed(self, td: dict[str, Any]) -> None:
+        tid = td.get("id")
+        if not isinstance(tid, str):
+            return
+        for worker, target in self._workers:
+            worker.submit(self._delete_op(target, tid))
+
+    def _put_op(self, target: Any, tid: str, td: dict[str, Any]) -> Op:
+        async def put() -> None:
+            if target is self.directory:
+                from wott_directory import DirectoryError
+
+                try:
+                    await target.put(tid, td)
+                except DirectoryError as e:
+                    details = "; ".join(f"{v.get('field')}: {v.get('description')}"
+                                        for v in e.validation_errors)
+                    log.error("the directory refused the TD of %s: %s %s", tid, e, details)
+            else:
+                await target.register(td)
+
+        return put
+
+    def _delete_op(self, target: Any, tid: str) -> Op:
+        async def delete() -> None:
+            if target is self.directory:
+                if tid in target:
+                    await target.delete(tid)
+            else:
+                await target.unregister(tid)
+
+        return delete
+
+    def describe(self) -> dict[str, Any]:
+        return {"directory": self.url, "registered_to": [r.url for r in self.cfg.register_to]}

@@ -1,0 +1,273 @@
+"""mDNS for the hub: announce its directory and Things, adopt the WoT devices it finds.
+
+Announcements (WoT Discovery 6.3): the directory as ``_directory._sub._wot._tcp``
+(TXT ``td=/.well-known/wot``, ``type=Directory``) and every served Thing as
+``_wot._tcp`` (``td=/wot/<id>``, ``type=Thing``, ``scheme=http``), on the
+interfaces the hub listens on: loopback only for the demo on 127.0.0.1.
+
+Adoption: the browser's services and the ``directories`` of the config go
+through the ``Explorer``, which fetches each TD, merges introductions by TD id
+and asks the plugin registry to claim it (``wott_hub_claim_td``; the built-in
+``wot-remote`` family claims Tactile TDs). A claimed Thing becomes a device of
+the hub (``hub.add_device``), re-exposed with the hub's own Tactile TD. When
+it comes back on another address it is re-targeted, not added twice; when it
+leaves (mDNS goodbye, deleted from its directory) the device is reported
+``disconnected`` and stays served, ready for its return. The hub's own
+services and Things are never adopted (own instance names and TD ids), nor,
+unless ``adopt_hub_things``, the Things another wott-hub already serves.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+from urllib.parse import urlsplit
+
+from .config import DiscoveryConfig
+from .directory import OWN_ID_PREFIX
+
+if TYPE_CHECKING:
+    from wott_hub.discovery import FoundThing
+    from wott_hub.hub import Hub
+
+__all__ = ["HubDiscovery", "instance_label"]
+
+log = logging.getLogger("wott_hub.network")
+
+_ALL = ("0.0.0.0", "::", "")
+
+
+def instance_label(text: str, limit: int = 63) -> str:
+    """A DNS-SD instance name of at most ``limit`` UTF-8 bytes (RFC 6763 4.1.1); dots become '-'
+    (python-zeroconf does not escape them)."""
+    text = text.replace(".", "-")
+    raw = text.encode()[:limit]
+    return raw.decode("utf-8", "ignore")
+
+
+class HubDiscovery:
+    def __init__(self, hub: Hub, cfg: DiscoveryConfig, own_ids: set[str]) -> None:
+        self.hub = hub
+        self.cfg = cfg
+        self.own_ids = own_ids  # TD ids of everything the hub serves (and its directory's), kept live
+        self.zc: Any = None
+        self.announcer: Any = None
+        self.browser: Any = None
+        self.explorer: Any = None
+        self.adopted: dict[str, str] = {}  # foreign TD id -> device id
+        self.unclaimed: dict[str, str] = {}  # foreign TD id -> its URL: no plugin adopts it
+        self.failed: dict[str, str] = {}  # foreign TD id -> why adopting it failed
+        self._names: dict[str, str] = {}  # served Thing id -> full mDNS instance name
+        self._tasks: set[asyncio.Task[Any]] = set()
+        self._directory_name: str | None = None
+        self.started = False
+
+    # --- where mDNS runs ---------------------------------------------------------------
+
+    def interfaces(self) -> list[str] | None:
+        """Interface addresses for zeroconf; None: all of them."""
+        if self.cfg.interfaces:
+            return list(self.cfg.interfaces)
+        host = self.hub.config.host
+        if host in _ALL:
+            return None
+        if host == "localhost":
+            return ["127.0.0.1"]
+        return [host]
+
+    def addresses(self) -> list[str] | None:
+        """Addresses announced in the A records; None: the announcer's default (this host's)."""
+        iface = self.interfaces()
+        if iface is None:
+            return None
+        return [a for a in iface if ":" not in a] or iface
+
+    # --- lifecycle -----------------------------------------------------------------------
+
+    async def start(self, directory_port: int | None) -> None:
+        cfg = self.cfg
+        if cfg.mdns or cfg.browse:
+            try:
+                from zeroconf.asyncio import AsyncZeroconf
+
+                iface = self.interfaces()
+                self.zc = AsyncZeroconf(interfaces=iface) if iface else AsyncZeroconf()
+            except OSError as e:  # no multicast here: the hub runs on without mDNS
+                log.error("mDNS is off: zeroconf could not start (%s)", e)
+        if self.zc is not None and cfg.mdns:
+            from wott_hub.discovery import Announcer
+
+            self.announcer = Announcer(self.zc, addresses=self.addresses())
+            if directory_port is not None:
+                self._spawn(self._announce_directory(directory_port))
+            for thing in list(self.hub.server.things):
+                self.exposed(thing.id)
+        if (self.zc is not None and cfg.browse) or cfg.directories:
+            from wott_hub.discovery import Explorer
+
+            self.explorer = Explorer(on_found=self._found, on_updated=self._updated, on_lost=self._lost,
+                                     claim=_claim, own_ids=self.own_ids, follow_directories=cfg.browse)
+            if self.zc is not None and cfg.browse:
+                from wott_hub.discovery import Browser
+
+                self.browser = Browser(self.zc, self.explorer.service_added, self.explorer.service_updated,
+                                       self.explorer.service_removed, ignore=self._is_own_service)
+                await self.browser.start()
+            for url in cfg.directories:
+                self.explorer.add_directory(url)
+        self.started = True
+
+    async def stop(self) -> None:
+        """Stop adopting, withdraw every announcement (goodbyes: browsers drop them at once)."""
+        self.started = False
+        if self.browser is not None:
+            await self.browser.stop()
+        if self.explorer is not None:
+            await self.explorer.close()
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self.announcer is not None:
+            names = list(self.announcer.names)
+            await asyncio.gather(*(self.announcer.withdraw(n) for n in names), return_exceptions=True)
+        if self.zc is not None:
+            with contextlib.suppress(Exception):
+                await self.zc.async_close()
+            self.zc = None
+
+    def _spawn(self, coro: Any) -> None:
+        task = asyncio.ensure_future(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    # --- announcing ----------------------------------------------------------------------
+
+    def _is_own_service(self, name: str) -> bool:
+        if self.announcer is None:
+            return False
+        return name in self.announcer.names or name in self._names.values() or name == self._directory_name
+
+    async def _announce_directory(self, port: int) -> None:
+        try:
+            self._directory_name = await self.announcer.announce_directory(
+                instance_label(self.hub.config.name), port)
+        except Exception as e:
+            log.warning("could not announce the directory on mDNS: %s", e)
+
+    def exposed(self, thing_id: str) -> None:
+        if self.announcer is None:
+            return
+        self._spawn(self._announce_thing(thing_id))
+
+    async def _announce_thing(self, thing_id: str) -> None:
+        if thing_id in self._names:
+            return
+        path = urlsplit(self.hub.td_url(thing_id)).path
+        name = instance_label(f"{thing_id} on {self.hub.config.name}")
+        self._names[thing_id] = f"{name}._wot._tcp.local."
+        try:
+            self._names[thing_id] = await self.announcer.announce_thing(name, self.hub.server.http_port, path)
+        except Exception as e:
+            log.warning("could not announce %s on mDNS: %s", thing_id, e)
+
+    def removed(self, thing_id: str) -> None:
+        name = self._names.pop(thing_id, None)
+        if name is not None and self.announcer is not None:
+            self._spawn(self.announcer.withdraw(name))
+
+    # --- adopting ------------------------------------------------------------------------
+
+    def _may_adopt(self, found: FoundThing) -> bool:
+        if found.id in self.own_ids:
+            return False
+        if found.id.startswith(OWN_ID_PREFIX) and not self.cfg.adopt_hub_things:
+            log.debug("%s is served by another wott-hub: not adopted", found.id)
+            return False
+        return True
+
+    async def _found(self, found: FoundThing) -> None:
+        if not self.started or not self._may_adopt(found):
+            return
+        if found.config is None:
+            self.unclaimed[found.id] = found.url
+            log.info("found %s at %s: no plugin adopts it", found.id, found.url)
+            return
+        await self._adopt(found)
+
+    async def _adopt(self, found: FoundThing) -> None:
+        from wott_hub.drivers.base import DriverError
+
+        cfg = found.config
+        device_id = self._free_id(cfg.id)
+        try:
+            await self.hub.add_device(replace(cfg, id=device_id))
+        except DriverError as e:
+            self.failed[found.id] = str(e)
+            log.warning("could not adopt %s (%s): %s", found.id, found.url, e)
+            return
+        self.failed.pop(found.id, None)
+        self.unclaimed.pop(found.id, None)
+        self.adopted[found.id] = device_id
+        log.info("adopted %s from %s as device %r (family %s)", found.id, found.url, device_id, cfg.family)
+
+    def _free_id(self, wanted: str) -> str:
+        taken = set(self.hub.server.things.by_id) | set(self.hub.devices)
+        if wanted not in taken:
+            return wanted
+        n = 2
+        while f"{wanted}-{n}" in taken:
+            n += 1
+        return f"{wanted}-{n}"
+
+    async def _updated(self, found: FoundThing) -> None:
+        """A new TD or address of a Thing already found: re-target its device (same device id,
+        same sequence for clients), or adopt it now if that had failed."""
+        if not self.started or not self._may_adopt(found):
+            return
+        device_id = self.adopted.get(found.id)
+        dev = self.hub.devices.get(device_id) if device_id is not None else None
+        if dev is None:
+            if found.config is None:
+                found.config = _claim(found.td)
+            if found.config is not None:
+                await self._adopt(found)
+            return
+        retarget = getattr(dev.driver, "retarget", None)
+        if retarget is not None:
+            retarget(found.td)
+            log.info("device %r (%s) moved to %s", device_id, found.id, found.url)
+            return
+        new = _claim(found.td)  # a plugin's driver without retarget: open it again
+        await self.hub.remove_device(device_id)
+        self.adopted.pop(found.id, None)
+        if new is not None:
+            found.config = replace(new, id=device_id)
+            await self._adopt(found)
+
+    async def _lost(self, found: FoundThing) -> None:
+        from wott_hub.drivers.base import Health
+
+        device_id = self.adopted.get(found.id)
+        dev = self.hub.devices.get(device_id) if device_id is not None else None
+        if dev is None:
+            return
+        reason = "no longer announced (mDNS goodbye or deleted from its directory)"
+        lost = getattr(dev.driver, "lost", None)
+        if lost is not None:
+            lost(reason)
+        else:
+            dev.driver.set_health(Health.disconnected, reason)
+        log.info("device %r (%s) is gone: %s", device_id, found.id, reason)
+
+    def describe(self) -> dict[str, Any]:
+        return {"mdns": self.announcer is not None, "browsing": self.browser is not None,
+                "adopted": dict(self.adopted), "unclaimed": dict(self.unclaimed), "failed": dict(self.failed)}
+
+
+def _claim(td: dict[str, Any]) -> Any:
+    from wott_hub.plugins import get_registry
+
+    return get_registry().claim(td)

@@ -1,0 +1,112 @@
+"""``hub.network``: the directory, the registrations and mDNS, fed by what the hub serves.
+
+The hub exposes and removes Things in several places (devices, the hub Thing,
+replays started from the CLI or by the hub Thing's action, adopted devices);
+all of them go through ``HubServer.expose`` and ``HubServer.remove``. The
+network listens there, on the hub's own server object, so every served Thing
+reaches the directory and mDNS whoever exposed it, and the servient keeps
+knowing nothing about directories.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING, Any
+
+from .directory import HubDirectory
+from .discovery import HubDiscovery
+
+if TYPE_CHECKING:
+    from wott_hub.hub import Hub
+    from wott_hub.servient import ServedThing
+
+__all__ = ["HubNetwork"]
+
+log = logging.getLogger("wott_hub.network")
+
+
+class HubNetwork:
+    def __init__(self, hub: Hub) -> None:
+        cfg = hub.config
+        self.hub = hub
+        self.own_ids: set[str] = set()
+        """TD ids of every Thing the hub serves and of its directory: discovery never adopts them."""
+        d = cfg.directory
+        self.directory = HubDirectory(hub, d) if d.enabled or d.register_to else None
+        s = cfg.discovery
+        self.discovery = HubDiscovery(hub, s, self.own_ids) if s.mdns or s.browse or s.directories else None
+        self.started = False
+        self._listen(hub.server)
+
+    def _listen(self, server: Any) -> None:
+        expose, remove = server.expose, server.remove
+
+        def exposing(served: ServedThing) -> Any:
+            exposed = expose(served)
+            self._exposed(served)
+            return exposed
+
+        def removing(thing_id: str) -> None:
+            served = server.things.get(thing_id)
+            remove(thing_id)
+            if served is not None:
+                self._removed(served)
+
+        server.expose = exposing
+        server.remove = removing
+
+    def _exposed(self, served: ServedThing) -> None:
+        tid = served.td.get("id")
+        if isinstance(tid, str):
+            self.own_ids.add(tid)
+        if not self.started:
+            return  # start() takes every Thing served by then
+        if self.directory is not None:
+            self.directory.exposed(served.td)
+        if self.discovery is not None:
+            self.discovery.exposed(served.id)
+
+    def _removed(self, served: ServedThing) -> None:
+        tid = served.td.get("id")
+        if tid in self.own_ids and not any(t.td.get("id") == tid for t in self.hub.server.things):
+            self.own_ids.discard(tid)
+        if not self.started:
+            return
+        if self.directory is not None:
+            self.directory.removed(served.td)
+        if self.discovery is not None:
+            self.discovery.removed(served.id)
+
+    async def start(self) -> None:
+        """After the history database is open (the directory lives in it)."""
+        if self.directory is not None:
+            await self.directory.start()
+            if self.directory.directory is not None:
+                self.own_ids.add(self.directory.directory.own_id)
+        self.started = True
+        if self.discovery is not None:
+            port = self.hub.server.http_port if self.directory is not None and \
+                self.directory.directory is not None else None
+            await self.discovery.start(port)
+
+    async def stop(self) -> None:
+        if not self.started:
+            return
+        self.started = False
+        if self.discovery is not None:
+            await self.discovery.stop()
+        if self.directory is not None:
+            await self.directory.stop()
+
+    async def drain(self) -> None:
+        """Wait until the directories have every change made so far."""
+        if self.directory is not None:
+            await self.directory.drain()
+
+    def describe(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"directory": None, "registered_to": []}
+        if self.directory is not None:
+            out.update(self.directory.describe())
+        if self.discovery is not None:
+            out["discovery"] = self.discovery.describe()
+        return out

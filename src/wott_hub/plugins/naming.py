@@ -1,0 +1,26 @@
+"""Errors that say which device they are about, for ``wott_hub_open_device`` implementations.
+
+A family's builder is easiest to test and reuse when its ``DriverError``s name
+only the setting at fault; the hook that calls it for one configured device
+adds the device and family, worded as the registry words its own (schema)
+errors: ``device 'left' (family 'barrel-vision'): fps: must be positive``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from wott_hub.drivers.base import DriverError
+
+from .model import DeviceConfig
+
+__all__ = ["naming_device"]
+
+
+@contextmanager
+def naming_device(config: DeviceConfig) -> Iterator[None]:
+    try:
+        yield
+    except DriverError as e:
+        raise DriverError(f"device {config.id!r} (family {config.family!r}): {e}") from None

@@ -1,0 +1,166 @@
+"""The device page in a real headless Chromium: mesh from the TD, live deformation, resume, replay.
+
+Assertions are on the state the page keeps in ``window.twin`` (what it applied and
+drew), polled with deadlines; screenshots go to the test's output folder.
+"""
+
+from __future__ import annotations
+
+import time
+from urllib.parse import quote
+
+import httpx
+import pytest
+
+from wott_hub.events.record import KIND_EVENT
+
+READY = "window.twin && window.twin.page === 'device' && window.twin.ready"
+
+
+def device_url(twin, thing_id: str) -> str:
+    """The device page for a Thing, given by its TD's URL in the directory (as the fleet page links it)."""
+    td_url = f"{twin.url}/things/{quote(f'urn:wott-hub:device:{thing_id}', safe='')}"
+    return f"{twin.url}/twin/device.html?td={quote(td_url, safe='')}"
+
+
+@pytest.fixture(scope="module")
+def barrel(twin, browser, open_page, wait):
+    """One device page on the busy barrel, shared by the tests of this module (in order)."""
+    page = open_page(browser)
+    page.goto(device_url(twin, "barrel"))
+    wait(page, READY, timeout=20_000)
+    yield page
+    page.close()
+
+
+def test_device_page_builds_the_mesh_from_the_td_and_deforms_it_live(twin, barrel, screenshot, wait):
+    page = barrel
+    nodes = httpx.get(f"{twin.url}/wot/barrel/properties/skinNodes").json()
+    cells = httpx.get(f"{twin.url}/wot/barrel/properties/skinCells").json()
+    st = page.evaluate("window.twin")
+    assert (st["nodes"], st["cells"]) == (nodes["numOfNodes"], cells["numOfCells"]) == (707, 1374)
+    trace = page.evaluate("(() => { const d = document.getElementById('skin').data[0];"
+                          " return {type: d.type, n: d.x.length, tri: d.i.length}; })()")
+    assert trace == {"type": "mesh3d", "n": 707, "tri": 1374}
+    assert page.locator("#skin canvas").count() >= 1
+    # the scene presses 4 mm: a deep packet is drawn, coloured by intensity, and actions show
+    # (the trace's intensities are those of the packet applied last, checked in the same instant)
+    # A deep packet drawn and nothing newer applied: hold that picture (the page's "hold" box) for the
+    # screenshot, in the same instant, so the image shows the press.
+    wait(page,
+        """() => { const t = window.twin, d = document.getElementById('skin').data[0];
+                   const deep = t.drawn && t.drawn.max > 3 && t.drawn.seq === t.applied.seq && t.contacts > 0
+                     && t.action && Math.max(...d.intensity) === t.applied.max;
+                   if (deep) t.freeze = document.getElementById('freeze').checked = true;
+                   return deep; }""",
+        timeout=15_000)
+    screenshot(page, "twin-barrel")
+    page.uncheck("#freeze")
+    assert page.evaluate("window.twin.freeze") is False
+    assert page.evaluate("window.twin.packets") > page.evaluate("window.twin.frames") > 0  # coalesced
+    assert page.errors == []
+
+
+def test_skin_geometry_triangulates_quads_and_dents_along_the_inward_normal(barrel):
+    """skin.js on the flat pad's TD values (quads, normal +z): what the page does to any packet."""
+    from wott_hub.examples import example_device
+    from wott_hub.td.builder import static_property_values
+
+    values = static_property_values(example_device("flat"))
+    got = barrel.evaluate(
+        """async ([nodes, cells]) => {
+          const {Skin} = await import('/twin/skin.js');
+          const s = new Skin(nodes, cells);
+          const max = s.apply({arrayOfDeformedNodes: [{deformedNodeID: 5, deformedNodeIntensity: 1.5},
+                                                      {deformedNodeID: 99999, deformedNodeIntensity: 9}]}, 2);
+          return {n: s.n, tri: s.i.length, nz: Array.from(s.normals).filter((v, k) => k % 3 === 2),
+                  z5: s.z[5], rest5: s.rest[17], max, others: s.intensity.filter(v => v > 0).length};
+        }""", [values["skinNodes"], values["skinCells"]])
+    assert got["n"] == 256 and got["tri"] == 2 * 225  # each quad as two triangles
+    assert all(abs(v - 1) < 1e-9 for v in got["nz"])  # outward = +z for the pad
+    assert got["max"] == 1.5 and got["others"] == 1  # an unknown node id is ignored
+    assert abs(got["z5"] - (got["rest5"] - 2 * 1.5)) < 1e-9  # 1.5 mm into the skin, shown at 2x
+
+
+def test_dropped_sse_connection_resumes_without_loss(twin, barrel, wait):
+    page = barrel
+    wait(page, "window.twin.seqs.length >= 20", timeout=10_000)
+    before = page.evaluate("window.twin.seqs.length")
+    reconnects = page.evaluate("window.twin.reconnects")
+
+    def drop() -> int:
+        n = 0
+        for h in list(twin.hub.server.ctx.sse):
+            if h.request.path == "/wot/barrel/events":
+                h.request.connection.stream.close()  # the TCP connection, as a network drop would
+                n += 1
+        return n
+
+    assert twin.call(drop) == 1
+    wait(page, f"window.twin.reconnects > {reconnects}"
+                           f" && window.twin.seqs.length >= {before + 40}", timeout=10_000)
+    seqs = page.evaluate("window.twin.seqs")
+    assert len(seqs) == len(set(seqs)) and seqs == sorted(seqs)  # nothing twice, in order
+
+    def served() -> list[int]:
+        ring = twin.hub.plane.stream("barrel").ring
+        return [r.seq for r in ring if r.kind == KIND_EVENT and seqs[0] <= r.seq <= seqs[-1]]
+
+    assert seqs == twin.call(served)  # nothing lost across the drop
+    assert page.evaluate("window.twin.reconnects") == reconnects + 1 and page.errors == []
+
+
+def test_replay_control_plays_pauses_resumes_and_goes_live(twin, barrel, wait):
+    page = barrel
+    wait(page, "window.twin.replay && window.twin.device === 'barrel'", timeout=10_000)
+    page.select_option("#range", "-10s")
+    page.click("#play")
+    wait(page, "window.twin.replay.state === 'playing' && window.twin.mode === 'replay'"
+                           " && window.twin.thing === 'urn:wott-hub:replay:barrel' && window.twin.frames > 2",
+                           timeout=15_000)
+    assert httpx.get(f"{twin.url}/wot/replay-barrel").status_code == 200
+    page.click("#pause")
+    wait(page, "window.twin.replay.state === 'paused'", timeout=10_000)
+    paused_at = page.evaluate("window.twin.last.stamp")
+    assert httpx.get(f"{twin.url}/wot/replay-barrel").status_code == 404  # stopped, not served
+    page.click("#play")
+    wait(page, f"window.twin.replay.state === 'playing' && window.twin.last"
+                           f" && window.twin.last.stamp > {paused_at}", timeout=15_000)
+    page.click("#live")
+    wait(page, "window.twin.mode === 'live' && window.twin.thing === 'urn:wott-hub:device:barrel'"
+                           " && window.twin.packets > 0", timeout=15_000)
+    assert httpx.get(f"{twin.url}/wot/replay-barrel").status_code == 404
+    assert page.evaluate("window.twin.replay.error") is None and page.errors == []
+
+
+def test_scripted_press_shows_up_in_the_page_within_a_second(twin, page, scene_barrel, wait):
+    """A scene pressing every 2.75 s from a known start; the page must apply the first press
+    after it is ready within a second of the time the scene presses."""
+    from wott_hub.examples import example_device
+
+    mesh = example_device("barrel").mesh
+    at = [round(float(v), 3) for v in mesh.nodes[mesh.free_indices[200]]]
+    cfg = scene_barrel("press", steps=[{"kind": "press", "at": at, "start_s": 2.0, "duration_s": 0.5,
+                                        "depth_mm": 3.0, "radius_mm": 12.0}])
+    period_ms = (2.5 + 0.25) * 1000  # the scene's duration: last step's end and a rest tail
+    t0_ms = time.time() * 1000
+    twin.call(twin.hub.add_device, cfg)
+    try:
+        page.goto(device_url(twin, "press"))
+        wait(page, f"{READY} && window.twin.streamState === 'open'", timeout=20_000)
+        ready_ms = time.time() * 1000
+        # the device's clock starts after t0, so each press is no earlier than computed here
+        press_ms = t0_ms + 2000
+        while press_ms < ready_ms + 200:
+            press_ms += period_ms
+        onset = wait(page,
+            "t => window.twin.onsets.find(o => o.stamp >= t && o.applied !== null) || null",
+            arg=press_ms - 50, timeout=period_ms + 5000).json_value()
+        assert onset["stamp"] - press_ms < period_ms / 2  # this press, not a later one
+        assert onset["applied"] - press_ms < 1000, onset
+        # and the release: the skin is drawn at rest again
+        wait(page, "window.twin.drawn && window.twin.last.max === 0"
+                               " && window.twin.drawn.max === 0", timeout=5000)
+        assert page.errors == []
+    finally:
+        twin.call(twin.hub.remove_device, "press")
