@@ -13,6 +13,7 @@ import numpy as np
 from httpx_sse import aconnect_sse
 
 from wott_hub.config import HubConfig
+from wott_hub.drivers.base import Health
 from wott_hub.drivers.remote import RemoteWoTDriver, re_exposed_epsilon
 from wott_hub.examples import example_device
 from wott_hub.hub import Hub
@@ -90,6 +91,17 @@ def test_a_hub_re_exposes_another_hubs_device_from_its_td_url(tmp_path):
                                                                               "Shore 00-50")
             assert desc.epsilon_mm < example_device("flat").epsilon_mm
             assert b.server.things.get("palm").td["title"] == "Palm via b"
+
+            # a packet -> each intensity along the inward normal; unknown nodes are dropped, reported
+            packet = {"timeStamp": 7, "numOfDeformedNodes": 2, "arrayOfDeformedNodes": [
+                {"deformedNodeID": 10, "deformedNodeIntensity": 0.5},
+                {"deformedNodeID": 99999, "deformedNodeIntensity": 1.0}]}
+            frame = driver._packet_frame(json.dumps(packet))
+            np.testing.assert_allclose(frame.displacement[10], -0.5 * desc.mesh.normals[10])
+            assert np.count_nonzero(np.abs(frame.displacement).sum(axis=1)) == 1
+            assert driver.health().state == "degraded" and driver.bad_packets == 1
+            assert driver._packet_frame("not json") is None and driver.bad_packets == 2
+            driver.set_health(Health.ok)
 
             source, copy_, opened = [], [], [asyncio.Event(), asyncio.Event()]
             tasks = [asyncio.ensure_future(collect(f"{a.td_url('pad')}/events/skinDeformedDetection", source,

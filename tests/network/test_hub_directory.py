@@ -124,7 +124,7 @@ def test_writes_need_the_token_when_one_is_set_and_a_hub_without_history_keeps_i
 
 def test_a_directory_request_during_start_up_waits_for_the_directory(tmp_path, scene):
     """The TDs are served before the database opens; /things asked meanwhile answers once the
-    directory is there, with every Thing in it."""
+    directory is there, with every Thing in it; a registration sent meanwhile is applied."""
     async def scenario() -> None:
         hub = Hub(HubConfig(http_port=0, ws_port=0, database=str(tmp_path / "h.db"), devices=(scene("pad"),)))
         opened = asyncio.Event()
@@ -141,8 +141,11 @@ def test_a_directory_request_during_start_up_waits_for_the_directory(tmp_path, s
         start = asyncio.ensure_future(hub.start())
         await opened.wait()
         async with httpx.AsyncClient(timeout=10) as http:
-            resp = await http.get(f"{hub.http_url}/things")
+            put, resp = await asyncio.gather(  # a write (with its body) and a read, both held
+                http.put(f"{hub.http_url}/things/urn:example:lamp", json=LAMP),
+                http.get(f"{hub.http_url}/things"))
         try:
+            assert put.status_code == 201
             assert resp.status_code == 200
             assert "urn:wott-hub:device:pad" in {td["id"] for td in resp.json()}
         finally:

@@ -49,5 +49,6 @@ class EventRow(Base):
 
 
 def create_schema(engine: Engine) -> None:
-    """Create the directory's tables if missing (the hub adds them to its Alembic migrations later)."""
+    """Create the directory's tables if missing (standalone; the hub creates them with its Alembic
+    migrations, revision 0002, and opens the directory with ``create_tables=False``)."""
     Base.metadata.create_all(engine)

@@ -41,6 +41,7 @@ def replay(
     from wott_hub.drivers.base import DriverError
     from wott_hub.history import parse_time
     from wott_hub.hub import Hub
+    from wott_hub.network import DirectoryConfig
 
     try:
         lo = parse_time(t_from) if t_from else None
@@ -52,7 +53,9 @@ def replay(
         typer.echo("error: --speed must be >= 0", err=True)
         raise typer.Exit(2)
     db = resolve_database(database, config)
-    cfg = HubConfig(name=f"replay of {device}", host=host, http_port=port, ws_port=ws_port, database=db)
+    # no directory: the one in this database belongs to the hub that runs on it (one owner per tables)
+    cfg = HubConfig(name=f"replay of {device}", host=host, http_port=port, ws_port=ws_port, database=db,
+                    directory=DirectoryConfig(enabled=False))
 
     async def main() -> int:
         hub = Hub(cfg)

@@ -79,6 +79,8 @@ def _print(hub, info: dict, cfg) -> None:
     if info["websocket"]:
         w(f"  WebSocket  {info['websocket']}/<id>   (wotpy JSON-RPC)")
     w(f"  hub Thing  {info['hub']}")
+    if info.get("directory"):
+        w(f"  directory  {info['directory']}things   (W3C WoT TDD: search/jsonpath, events)")
     w(f"  history    {info['database'] or 'off'}")
     w(f"  devices ({len(info['devices'])}):")
     for did, url in info["devices"].items():

@@ -254,7 +254,7 @@ class RemoteWoTDriver(Driver):
                     if property_url(self.td, name, self.td_url) is not None:
                         with contextlib.suppress(httpx.HTTPError, ValueError, DriverError):
                             values[name] = await self._read(client, name)
-        except httpx.HTTPError as e:
+        except (httpx.HTTPError, ValueError) as e:  # unreachable, an HTTP error, not JSON
             raise DriverError(f"cannot read the device at {self.td_url or self.td.get('base')}: "
                               f"{type(e).__name__}: {e}") from None
         td = self.td

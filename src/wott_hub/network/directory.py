@@ -13,8 +13,8 @@ The embedded directory lives in the hub's database (tables ``tdd_things`` and
 ``create_all``), and is mounted at the host root (``/things``,
 ``/search/jsonpath``, ``/events``, ``/.well-known/wot``). Its routes are
 mounted when the hub is built and the directory opens with the database, a
-moment after the TDs are served: a request arriving in between waits for it,
-as the hub's own stream requests wait for the history.
+moment after the TDs are served: a request arriving in between waits for it
+(``routes.py``), as the hub's own stream requests wait for the history.
 
 Writes by other clients: with ``[directory] token`` they need that bearer
 token; without one, clients on loopback write freely when the hub listens on
@@ -31,6 +31,7 @@ from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
 from .config import DirectoryConfig
+from .routes import DIRECTORY_PATHS, DirectoryRouter
 
 if TYPE_CHECKING:
     from wott_directory import Directory, Registrar
@@ -46,6 +47,7 @@ OWN_ID_PREFIX = "urn:wott-hub:"
 registered without a ttl, are deleted from the embedded directory when the hub starts."""
 
 Op = Callable[[], Awaitable[Any]]
+UNREGISTER_TIMEOUT_S = 5.0
 
 
 class _Worker:
@@ -76,37 +78,17 @@ class _Worker:
         if self.task is not None and not self.task.done():
             await self.queue.join()
 
-    async def stop(self) -> None:
+    async def stop(self, finish: bool = True) -> None:
+        """``finish``: do the writes still queued first; otherwise drop them."""
         if self.task is None:
             return
-        self.queue.put_nowait(None)
+        if finish:
+            self.queue.put_nowait(None)
+        else:
+            self.task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await self.task
         self.task = None
-
-
-def _waiting_handler(cls: type, holder: HubDirectory) -> type:
-    """``cls`` (a wott_directory handler) waiting for the directory to be open before it answers."""
-
-    class Waiting(cls):  # type: ignore[misc, valid-type]
-        def initialize(self, directory: Any = None) -> None:
-            self.directory = holder.directory  # type: ignore[assignment]
-
-        async def prepare(self) -> None:
-            if not holder.ready.is_set():
-                await holder.ready.wait()
-            directory = holder.directory
-            if directory is None or not directory.started:
-                from wott_directory import DirectoryError
-
-                raise DirectoryError(503, "The hub's directory is not available (see the hub's log)")
-            self.directory = directory
-            result = super().prepare()
-            if result is not None:
-                await result
-
-    Waiting.__name__ = Waiting.__qualname__ = f"Hub{cls.__name__}"
-    return Waiting
 
 
 class HubDirectory:
@@ -114,15 +96,13 @@ class HubDirectory:
         self.hub = hub
         self.cfg = cfg
         self.directory: Directory | None = None
-        self.ready = asyncio.Event()
         self.registrars: list[Registrar] = []
         self._workers: list[tuple[_Worker, Any]] = []  # (worker, the embedded Directory or a Registrar)
         self.started = False
-        if cfg.enabled:
-            from wott_directory import directory_handlers
-
-            routes = directory_handlers(None, prefix="")  # type: ignore[arg-type]  # the route table
-            hub.add_handlers([(pattern, _waiting_handler(cls, self), {}) for pattern, cls, _ in routes])
+        self.router: DirectoryRouter | None = None
+        if cfg.enabled:  # mounted now, without importing the directory (see routes.py)
+            self.router = DirectoryRouter(hub.server.http.app)
+            hub.add_handlers([(DIRECTORY_PATHS, self.router)])
 
     @property
     def url(self) -> str | None:
@@ -142,13 +122,14 @@ class HubDirectory:
             if self.directory is not None:  # a client waiting for /things gets the whole fleet
                 await self._workers[0][0].drain()
         finally:
-            self.ready.set()  # requests waiting for a directory that failed to open get a 503
+            if self.router is not None:
+                self.router.open()  # held requests go through (503 if the directory failed)
         for registrar in self.registrars:
             registrar.start()
         self.started = True
 
     async def _open_embedded(self) -> None:
-        from wott_directory import Directory, DirectorySettings
+        from wott_directory import Directory, DirectorySettings, directory_handlers
         from wott_directory.settings import is_loopback
 
         cfg, hub = self.cfg, self.hub
@@ -171,6 +152,7 @@ class HubDirectory:
             await directory.stop()
             return
         self.directory = directory
+        self.router.install(directory_handlers(directory, prefix=""))
         await self._forget_stale()
         worker = _Worker("embedded")
         worker.start()
@@ -220,11 +202,14 @@ class HubDirectory:
         """Stop writing; delete the hub's Things from the ``register_to`` directories (a clean stop:
         they are gone now, not in ttl seconds); close the embedded directory (its streams end)."""
         self.started = False
-        for worker, _ in self._workers:
-            await worker.stop()
+        for worker, target in self._workers:  # the local one finishes; remote ones are unregistered
+            await worker.stop(finish=target is self.directory)
         for registrar in self.registrars:
-            with contextlib.suppress(Exception):
-                await registrar.stop(unregister=True)
+            try:  # a directory that does not answer must not hold the hub's shutdown up
+                await asyncio.wait_for(registrar.stop(unregister=True), UNREGISTER_TIMEOUT_S)
+            except Exception as e:  # TimeoutError included
+                log.warning("could not unregister from %s (%s); the TDs expire in %g s", registrar.client.url,
+                            type(e).__name__, self.cfg.ttl_s)
             registrar.client.close()
         if self.directory is not None:
             await self.directory.stop()

@@ -95,8 +95,9 @@ class HubDiscovery:
 
                 iface = self.interfaces()
                 self.zc = AsyncZeroconf(interfaces=iface) if iface else AsyncZeroconf()
-            except OSError as e:  # no multicast here: the hub runs on without mDNS
-                log.error("mDNS is off: zeroconf could not start (%s)", e)
+            except Exception as e:  # no multicast here, an odd interface: the hub runs on without mDNS
+                log.error("mDNS is off: zeroconf could not start on %s (%s: %s)",
+                          self.interfaces() or "all interfaces", type(e).__name__, e)
         if self.zc is not None and cfg.mdns:
             from wott_hub.discovery import Announcer
 
@@ -105,6 +106,7 @@ class HubDiscovery:
                 self._spawn(self._announce_directory(directory_port))
             for thing in list(self.hub.server.things):
                 self.exposed(thing.id)
+        self.started = True  # from here on, what the explorer finds is adopted
         if (self.zc is not None and cfg.browse) or cfg.directories:
             from wott_hub.discovery import Explorer
 
@@ -118,7 +120,6 @@ class HubDiscovery:
                 await self.browser.start()
             for url in cfg.directories:
                 self.explorer.add_directory(url)
-        self.started = True
 
     async def stop(self) -> None:
         """Stop adopting, withdraw every announcement (goodbyes: browsers drop them at once)."""
@@ -167,11 +168,17 @@ class HubDiscovery:
             return
         path = urlsplit(self.hub.td_url(thing_id)).path
         name = instance_label(f"{thing_id} on {self.hub.config.name}")
-        self._names[thing_id] = f"{name}._wot._tcp.local."
+        intended = self._names[thing_id] = f"{name}._wot._tcp.local."  # the browser skips it already
         try:
-            self._names[thing_id] = await self.announcer.announce_thing(name, self.hub.server.http_port, path)
+            full = await self.announcer.announce_thing(name, self.hub.server.http_port, path)
         except Exception as e:
+            self._names.pop(thing_id, None)
             log.warning("could not announce %s on mDNS: %s", thing_id, e)
+            return
+        if self._names.get(thing_id) != intended:  # removed while it was being announced
+            await self.announcer.withdraw(full)
+            return
+        self._names[thing_id] = full
 
     def removed(self, thing_id: str) -> None:
         name = self._names.pop(thing_id, None)
@@ -204,9 +211,9 @@ class HubDiscovery:
         device_id = self._free_id(cfg.id)
         try:
             await self.hub.add_device(replace(cfg, id=device_id))
-        except DriverError as e:
-            self.failed[found.id] = str(e)
-            log.warning("could not adopt %s (%s): %s", found.id, found.url, e)
+        except Exception as e:  # DriverError, or a plugin's bug: the others are still adopted
+            self.failed[found.id] = str(e) if isinstance(e, DriverError) else f"{type(e).__name__}: {e}"
+            log.warning("could not adopt %s (%s): %s", found.id, found.url, self.failed[found.id])
             return
         self.failed.pop(found.id, None)
         self.unclaimed.pop(found.id, None)
