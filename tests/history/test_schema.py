@@ -111,5 +111,9 @@ def test_inserts_use_the_drivers_paramstyle():
 
     cols = ("a", "b")
     assert positional_insert(E(sqlite.dialect()), "t", cols) == "INSERT INTO t (a, b) VALUES (?, ?)"
+    two = positional_insert(E(sqlite.dialect()), "t", cols, 2)
+    assert two == "INSERT INTO t (a, b) VALUES (?, ?), (?, ?)"
     pg = postgresql.dialect(paramstyle="pyformat")
-    assert positional_insert(E(pg), "t", cols) == "INSERT INTO t (a, b) VALUES (%s, %s)"
+    assert positional_insert(E(pg), "t", cols, 2) == "INSERT INTO t (a, b) VALUES (%s, %s), (%s, %s)"
+    assert positional_insert(E(postgresql.dialect(paramstyle="numeric_dollar")), "t", cols, 2) == (
+        "INSERT INTO t (a, b) VALUES ($1, $2), ($3, $4)")

@@ -1,4 +1,5 @@
-"""Which history database a command reads: ``--database``, else ``--config``'s, else the default."""
+"""What the history commands share: which database (``--database``, else ``--config``'s, else the
+default) and how a ``--from``/``--to`` range is read."""
 
 from __future__ import annotations
 
@@ -36,3 +37,14 @@ def open_reader(database: str):
         typer.echo(f"error: {e}", err=True)
         raise typer.Exit(1) from None
     return HistoryReader(engine)
+
+
+def time_range(t_from: str | None, t_to: str | None) -> tuple[int | None, int | None]:
+    """``--from``/``--to`` as ns (None = open end); exit 2 with the parser's message if unreadable."""
+    from wott_hub.history import parse_time
+
+    try:
+        return (parse_time(t_from) if t_from else None, parse_time(t_to) if t_to else None)
+    except ValueError as e:
+        typer.echo(f"error: {e}", err=True)
+        raise typer.Exit(2) from None

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from ._db import open_reader, resolve_database
+from ._db import open_reader, resolve_database, time_range
 
 app = typer.Typer(help="Recorded events: list devices and time ranges, export as JSON Lines.",
                   no_args_is_help=True)
@@ -55,14 +55,9 @@ def export(
     config: Path = _CFG,
 ) -> None:
     """Write a device's records in a time range as JSON Lines (one record per line, in order)."""
-    from wott_hub.history import export_jsonl, parse_time
+    from wott_hub.history import export_jsonl
 
-    try:
-        lo = parse_time(t_from) if t_from else None
-        hi = parse_time(t_to) if t_to else None
-    except ValueError as e:
-        typer.echo(f"error: {e}", err=True)
-        raise typer.Exit(2) from None
+    lo, hi = time_range(t_from, t_to)
     reader = open_reader(resolve_database(database, config))
     if reader.key(device) is None:
         typer.echo(f"error: no recorded device {device!r}", err=True)

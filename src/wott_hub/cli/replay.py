@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._db import resolve_database
+from ._db import resolve_database, time_range
 
 app = typer.Typer()
 
@@ -39,16 +39,10 @@ def replay(
 
     from wott_hub.config import HubConfig
     from wott_hub.drivers.base import DriverError
-    from wott_hub.history import parse_time
     from wott_hub.hub import Hub
     from wott_hub.network import DirectoryConfig
 
-    try:
-        lo = parse_time(t_from) if t_from else None
-        hi = parse_time(t_to) if t_to else None
-    except ValueError as e:
-        typer.echo(f"error: {e}", err=True)
-        raise typer.Exit(2) from None
+    lo, hi = time_range(t_from, t_to)
     if speed < 0:
         typer.echo("error: --speed must be >= 0", err=True)
         raise typer.Exit(2)

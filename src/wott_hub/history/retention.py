@@ -76,26 +76,28 @@ def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> 
         return 0
     now_ns = now_ns if now_ns is not None else time.time_ns()
     deleted = 0
-    with engine.begin() as conn:
+    # reads and deletes in separate transactions: a transaction that reads first and then
+    # writes can fail at once on SQLite (stale WAL snapshot) if another connection wrote meanwhile
+    with engine.connect() as conn:
         keys = list(conn.execute(sa.select(ThingRow.__table__.c.key)).scalars())
-        if r.days:
+    if r.days:
+        with engine.begin() as conn:
             deleted += _delete_before(conn, keys, now_ns - int(r.days * 86400e9))
     if r.max_mb:
         limit = r.max_mb * 1e6
         for _ in range(8):
-            with engine.begin() as conn:
+            with engine.connect() as conn:
                 used = used_bytes(conn)
-                if used is None or used <= limit:
-                    break
-                span = _span(conn, keys)
-                if span is None or span[0] >= span[1]:
-                    break
-                lo, hi = span
-                keep = max(0.0, min(1.0, 0.9 * limit / used))
+                span = _span(conn, keys) if used is not None and used > limit else None
+            if span is None or span[0] >= span[1]:
+                break
+            lo, hi = span
+            keep = max(0.0, min(1.0, 0.9 * limit / used))
+            with engine.begin() as conn:
                 n = _delete_before(conn, keys, int(hi - (hi - lo) * keep))
-                deleted += n
-                if n == 0:
-                    break
+            deleted += n
+            if n == 0:
+                break
     if deleted:
         log.info("retention deleted %d events", deleted)
     return deleted

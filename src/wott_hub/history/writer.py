@@ -15,6 +15,7 @@ memory; live subscribers still get them.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 import time
@@ -42,24 +43,33 @@ as fewer than this many of one Thing wait in the queue (``queue_max`` keeps it s
 _COLUMNS = ("thing_key", "seq", "t_ns", "kind", "name", "data")
 
 
-def positional_insert(engine: Engine, table: str, columns: tuple[str, ...]) -> str:
-    """An INSERT in the driver's own positional paramstyle, for ``exec_driver_sql`` executemany.
+def positional_insert(engine: Engine, table: str, columns: tuple[str, ...], rows: int = 1) -> str | None:
+    """An INSERT of ``rows`` rows in the driver's own positional paramstyle, taking the rows'
+    values as one flat tuple; None if the paramstyle is not positional (use executemany).
 
-    SQLAlchemy's Core insert would build a dict per row and process each value
-    in Python; tuples go straight to the driver (3-4x faster on SQLite).
+    SQLAlchemy's Core insert would build a dict per row and process each value in
+    Python; tuples go straight to the driver (3-4x faster on SQLite). Many rows per
+    statement matter as much: the sqlite3 module releases the GIL around each
+    statement step, and a thread that gets the GIL back only after the event loop's
+    switch interval (5 ms) would take seconds to insert a batch row by row while
+    holding the database's write lock, starving every other writer.
     """
     style = engine.dialect.paramstyle
+    n = len(columns)
     if style == "qmark":
-        marks = ["?"] * len(columns)
+        groups = ["(" + ", ".join(["?"] * n) + ")"] * rows
     elif style in ("format", "pyformat"):
-        marks = ["%s"] * len(columns)
-    elif style == "numeric":
-        marks = [f":{i + 1}" for i in range(len(columns))]
-    elif style == "numeric_dollar":
-        marks = [f"${i + 1}" for i in range(len(columns))]
-    else:  # named
-        marks = [f":{c}" for c in columns]
-    return f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join(marks)})"
+        groups = ["(" + ", ".join(["%s"] * n) + ")"] * rows
+    elif style in ("numeric", "numeric_dollar"):
+        mark = ":" if style == "numeric" else "$"
+        groups = ["(" + ", ".join(f"{mark}{r * n + i + 1}" for i in range(n)) + ")" for r in range(rows)]
+    else:  # named: not positional
+        return None
+    return f"INSERT INTO {table} ({', '.join(columns)}) VALUES {', '.join(groups)}"
+
+
+def _named_insert(table: str, columns: tuple[str, ...]) -> str:
+    return f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join(':' + c for c in columns)})"
 
 
 class HistoryWriter:
@@ -86,7 +96,13 @@ class HistoryWriter:
         self._wake = threading.Event()
         self._stop = False
         self._thread: threading.Thread | None = None
-        self._insert = positional_insert(engine, EventRow.__tablename__, _COLUMNS)
+        # rows per statement: SQLite before 3.32 allows 999 parameters, later 32766
+        import sqlite3
+
+        max_params = 999 if engine.dialect.name == "sqlite" and sqlite3.sqlite_version_info < (3, 32) \
+            else 30_000
+        self._chunk = max(1, min(1000, max_params // len(_COLUMNS)))
+        self._insert_full = positional_insert(engine, EventRow.__tablename__, _COLUMNS, self._chunk)
         self._next_retention = 0.0
 
     # --- Things -------------------------------------------------------------------
@@ -97,10 +113,25 @@ class HistoryWriter:
 
         Called before the Thing publishes anything (the plane starts above it).
         """
+        for attempt in range(8):
+            try:
+                return self._register(thing, title, family, td, static_values)
+            except sa.exc.OperationalError as e:  # another process holds SQLite's write lock long
+                if "locked" not in str(e) or attempt == 7:
+                    raise
+                time.sleep(0.05 * 2 ** attempt)
+        raise AssertionError("unreachable")
+
+    def _register(self, thing: str, title: str, family: str, td: str | None,
+                  static_values: str | None) -> int:
         things = ThingRow.__table__
         events = EventRow.__table__
         now = time.time_ns()
         with self.engine.begin() as conn:
+            # Write first: the transaction takes the write lock before it reads anything. (A
+            # read first pins a WAL snapshot, and SQLite refuses at once, without waiting, to
+            # turn a stale snapshot into a writer: "database is locked" under load.)
+            conn.execute(things.update().where(things.c.id == thing).values(updated_ns=now))
             row = conn.execute(sa.select(things.c.key, things.c.seq_reserved)
                                .where(things.c.id == thing)).first()
             values = {"title": title or thing, "family": family, "updated_ns": now}
@@ -215,7 +246,7 @@ class HistoryWriter:
             tops[r.thing] = r.seq  # records of one Thing arrive in seq order
         things = ThingRow.__table__
         with self.engine.begin() as conn:
-            conn.exec_driver_sql(self._insert, rows)
+            self._insert_rows(conn, rows)
             for thing, top in tops.items():
                 # Invariant: every seq handed out is <= the reservation. At most queue_max
                 # (<= RESERVE/2) records wait uncommitted, so moving the reservation when
@@ -230,6 +261,19 @@ class HistoryWriter:
         self.last_batch_s = time.perf_counter() - t0
         if self.on_commit is not None:
             self.on_commit(tops)
+
+    def _insert_rows(self, conn, rows: list[tuple]) -> None:
+        table = EventRow.__tablename__
+        if self._insert_full is None:  # a driver with a named paramstyle: executemany
+            conn.exec_driver_sql(_named_insert(table, _COLUMNS), [dict(zip(_COLUMNS, r, strict=True))
+                                                                   for r in rows])
+            return
+        chunk = self._chunk
+        for i in range(0, len(rows), chunk):
+            part = rows[i:i + chunk]
+            sql = self._insert_full if len(part) == chunk else positional_insert(
+                self.engine, table, _COLUMNS, len(part))
+            conn.exec_driver_sql(sql, tuple(itertools.chain.from_iterable(part)))
 
     def _release_reservations(self) -> None:
         """After a clean stop, the next run continues right after the last committed seq."""

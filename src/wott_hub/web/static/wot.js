@@ -72,18 +72,44 @@ export async function invokeAction(td, name, input) {
 // saw, so nothing is lost and nothing repeats. EventSource cannot set the
 // Last-Event-ID header on a fresh connection, so the id goes in ``lastEventId=``,
 // which the hub's SSE endpoints accept like the header.
-export class SseStream {
-  constructor(url, names, onEvent, {after = null, onState = null} = {}) {
-    this.url = url;
-    this.names = names;
-    this.onEvent = onEvent;
+// What both kinds of stream share: a state for the page to show, and reopening with
+// exponential backoff (up to 5 s) after a drop, until closed.
+class Reconnecting {
+  constructor(onState, firstDelay) {
     this.onState = onState;
-    this.lastEventId = after;
     this.state = "connecting";
     this.reconnects = 0;
     this.received = 0;
-    this.backoff = 100;
+    this.firstDelay = this.backoff = firstDelay;
     this.closed = false;
+  }
+
+  _received() {
+    this.received++;
+    this.backoff = this.firstDelay;
+  }
+
+  _retry() {
+    if (this.closed) return;
+    this.reconnects++;
+    this._set("reconnecting");
+    setTimeout(() => this._open(), this.backoff);
+    this.backoff = Math.min(this.backoff * 2, 5000);
+  }
+
+  _set(state) {
+    this.state = state;
+    if (this.onState) this.onState(state, this);
+  }
+}
+
+export class SseStream extends Reconnecting {
+  constructor(url, names, onEvent, {after = null, onState = null} = {}) {
+    super(onState, 100);
+    this.url = url;
+    this.names = names;
+    this.onEvent = onEvent;
+    this.lastEventId = after;
     this._open();
   }
 
@@ -96,8 +122,7 @@ export class SseStream {
     for (const name of this.names) {
       es.addEventListener(name, (e) => {
         if (e.lastEventId) this.lastEventId = e.lastEventId;
-        this.received++;
-        this.backoff = 100;
+        this._received();
         let data;
         try {
           data = JSON.parse(e.data);
@@ -109,17 +134,8 @@ export class SseStream {
     }
     es.onerror = () => {
       es.close();
-      if (this.closed) return;
-      this.reconnects++;
-      this._set("reconnecting");
-      setTimeout(() => this._open(), this.backoff);
-      this.backoff = Math.min(this.backoff * 2, 5000);
+      this._retry();
     };
-  }
-
-  _set(state) {
-    this.state = state;
-    if (this.onState) this.onState(state, this);
   }
 
   close() {
@@ -132,19 +148,14 @@ export class SseStream {
 // A subscription over the wotpy WebSocket binding (JSON-RPC: on_event / on_property_change).
 // WebSockets do not count against the browser's six HTTP connections per host, which a
 // fleet page with one SSE stream per device would exhaust.
-export class WsSubscription {
+export class WsSubscription extends Reconnecting {
   constructor(url, name, onData, {property = false, onState = null, onOpen = null} = {}) {
+    super(onState, 200);
     this.url = url;
     this.onOpen = onOpen;
     this.name = name;
     this.onData = onData;
     this.property = property;
-    this.onState = onState;
-    this.state = "connecting";
-    this.reconnects = 0;
-    this.received = 0;
-    this.backoff = 200;
-    this.closed = false;
     this._open();
   }
 
@@ -164,23 +175,11 @@ export class WsSubscription {
         return;
       }
       if (!msg.subscription) return;
-      this.received++;
-      this.backoff = 200;
+      this._received();
       if (this.property && msg.name === "propertychange") this.onData(msg.data.value);
       else if (msg.name === this.name) this.onData(msg.data);
     };
-    ws.onclose = () => {
-      if (this.closed) return;
-      this.reconnects++;
-      this._set("reconnecting");
-      setTimeout(() => this._open(), this.backoff);
-      this.backoff = Math.min(this.backoff * 2, 5000);
-    };
-  }
-
-  _set(state) {
-    this.state = state;
-    if (this.onState) this.onState(state, this);
+    ws.onclose = () => this._retry();
   }
 
   close() {
