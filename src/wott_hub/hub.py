@@ -35,8 +35,9 @@ from wott_hub.drivers.base import Driver, DriverError
 from wott_hub.events.plane import EventPlane
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, encode
 from wott_hub.network import HubNetwork
+from wott_hub.pump import pump
 from wott_hub.servient import HUB_THING_ID, HubServer, ServedThing, clean_td, hub_td, with_forms
-from wott_hub.tactile import FrameError, FrameProcessor, FrameResult, ProcessingParams
+from wott_hub.tactile import FrameProcessor, FrameResult, ProcessingParams
 from wott_hub.td.builder import build_tactile_td, static_property_values
 
 __all__ = ["DeviceRuntime", "Hub", "ReplayRuntime", "demo_devices", "serve", "skin_deformed_json"]
@@ -363,41 +364,7 @@ class Hub:
 
     async def _pump(self, dev: DeviceRuntime) -> None:
         """Frames in, records out; a driver that raises is restarted with backoff."""
-        backoff = 0.5
-        clock = time.monotonic
-        while True:
-            try:
-                dev.state = "running"
-                last_yield = clock()
-                async for frame in dev.driver.frames():
-                    # A driver that is behind may yield frames without ever awaiting; then this
-                    # loop would hold the event loop. Give the others a turn every 5 ms at most.
-                    now = clock()
-                    if now - last_yield > 0.005:
-                        await asyncio.sleep(0)
-                        last_yield = clock()
-                    t_in = time.perf_counter_ns() if self.plane.trace else 0
-                    try:
-                        res = dev.processor.process(frame)
-                    except FrameError as e:
-                        dev.frame_errors += 1
-                        dev.reason = str(e)
-                        continue
-                    dev.frames += 1
-                    self._publish(dev, res, t_in)
-                    backoff = 0.5
-                dev.state = "ended"
-                dev.reason = "the device's frame stream ended"
-                return
-            except asyncio.CancelledError:
-                raise
-            except Exception as e:  # a driver bug: report, back off, try again
-                dev.restarts += 1
-                dev.state = "failed"
-                dev.reason = f"{type(e).__name__}: {e}"
-                log.exception("device %s failed; restarting in %.1f s", dev.id, backoff)
-                await asyncio.sleep(backoff)
-                backoff = min(backoff * 2, 30.0)
+        await pump(dev, dev.id, lambda res, t_in: self._publish(dev, res, t_in), trace=self.plane.trace)
 
     def _publish(self, dev: DeviceRuntime, res: FrameResult, t_in: int) -> None:
         plane, tid = self.plane, dev.id

@@ -224,55 +224,28 @@ async def _close(d: _Device) -> None:
 async def _pump(did: str, d: _Device, trace: bool, send) -> None:
     from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, encode
     from wott_hub.hub import ACTION, CONTACTS, SKIN_DEFORMED, skin_deformed_json
-    from wott_hub.tactile import FrameError
+    from wott_hub.pump import pump
 
-    clock = time.monotonic
     now = time.perf_counter_ns
-    backoff = 0.5
-    while True:
-        try:
-            d.state = "running"
-            last_yield = clock()
-            async for frame in d.driver.frames():
-                if clock() - last_yield > 0.005:
-                    await asyncio.sleep(0)
-                    last_yield = clock()
-                t_in = now() if trace else 0
-                try:
-                    res = d.processor.process(frame)
-                except FrameError as e:
-                    d.frame_errors += 1
-                    d.reason = str(e)
-                    continue
-                d.frames += 1
-                recs = []
-                tr = {"in": t_in, "proc": now()} if trace else None
-                if res.packet_due:
-                    data = skin_deformed_json(res)
-                    if tr is not None:
-                        tr["enc"] = now()
-                    recs.append((KIND_EVENT, SKIN_DEFORMED, res.t_ns, data, tr))
-                for action in res.actions:
-                    recs.append((KIND_EVENT, ACTION, res.t_ns, encode(action), None))
-                if res.contacts or d.had_contacts:
-                    d.had_contacts = bool(res.contacts)
-                    recs.append((KIND_PROPERTY, CONTACTS, res.t_ns, encode(res.contact_information()), None))
-                if recs:
-                    send(("recs", did, recs))
-                backoff = 0.5
-            d.state = "ended"
-            d.reason = "the device's frame stream ended"
-            send(("ended", did, d.reason))
-            return
-        except asyncio.CancelledError:
-            raise
-        except Exception as e:
-            d.restarts += 1
-            d.state = "failed"
-            d.reason = f"{type(e).__name__}: {e}"
-            log.exception("device %s failed in its worker; restarting in %.1f s", did, backoff)
-            await asyncio.sleep(backoff)
-            backoff = min(backoff * 2, 30.0)
+
+    def records(res, t_in: int) -> None:
+        recs = []
+        tr = {"in": t_in, "proc": now()} if trace else None
+        if res.packet_due:
+            data = skin_deformed_json(res)
+            if tr is not None:
+                tr["enc"] = now()
+            recs.append((KIND_EVENT, SKIN_DEFORMED, res.t_ns, data, tr))
+        for action in res.actions:
+            recs.append((KIND_EVENT, ACTION, res.t_ns, encode(action), None))
+        if res.contacts or d.had_contacts:
+            d.had_contacts = bool(res.contacts)
+            recs.append((KIND_PROPERTY, CONTACTS, res.t_ns, encode(res.contact_information()), None))
+        if recs:
+            send(("recs", did, recs))
+
+    await pump(d, did, records, trace=trace)
+    send(("ended", did, d.reason))
 
 
 def apply_health(driver: Driver, state: str, reason: str) -> None:
