@@ -27,15 +27,6 @@ WOTT_HUB = Path(sys.executable).with_name("wott-hub")
 FOREIGN = "urn:example:wot-skin-7"
 
 
-async def wait_for(predicate, timeout: float = 10.0, what: str = "condition") -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while not predicate():
-        if loop.time() > deadline:
-            raise AssertionError(f"{what}: not met within {timeout} s")
-        await asyncio.sleep(0.05)
-
-
 async def start_sim(host: str) -> tuple[asyncio.subprocess.Process, str]:
     proc = await asyncio.create_subprocess_exec(sys.executable, str(SIM), "--host", host, "--name", "skin-7",
                                                 "--id", FOREIGN, stdout=asyncio.subprocess.PIPE)
@@ -82,7 +73,7 @@ def same_packets(source: list[dict[str, Any]], reexposed: list[dict[str, Any]]) 
             {n["deformedNodeID"]: n["deformedNodeIntensity"] for n in p["arrayOfDeformedNodes"]}
 
 
-def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(tmp_path):
+def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(tmp_path, wait_for):
     async def scenario() -> None:
         cfg = HubConfig(name="hub-under-test", http_port=0, ws_port=0, database=str(tmp_path / "hub.db"),
                         discovery=DiscoveryConfig(mdns=True, browse=True))

@@ -35,14 +35,6 @@ def run(coro: Any, timeout: float = 60) -> Any:
     return asyncio.run(asyncio.wait_for(coro, timeout))
 
 
-async def wait_for(predicate, timeout: float = 15.0) -> None:
-    deadline = asyncio.get_running_loop().time() + timeout
-    while not predicate():
-        if asyncio.get_running_loop().time() > deadline:
-            raise AssertionError("condition not met in time")
-        await asyncio.sleep(0.05)
-
-
 class Sim:
     """The WoT device simulator in its own process."""
 
@@ -86,7 +78,7 @@ def registry() -> Registry:
     return reg
 
 
-def test_hub_announcements_are_found_by_another_process():
+def test_hub_announcements_are_found_by_another_process(wait_for):
     # introduction-dns-sd, -service-name, -service-name-directory, -txt-record
     async def scenario():
         directory = Directory(DirectorySettings(token=TOKEN))
@@ -148,7 +140,7 @@ def test_hub_announcements_are_found_by_another_process():
     run(scenario(), 90)
 
 
-def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry):
+def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wait_for):
     # discoverer-must-support-intros, -fetching, -merge-intros, -td-identify, -track
     events: list[tuple[str, FoundThing]] = []
 
@@ -189,7 +181,7 @@ def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry):
     run(scenario(), 120)
 
 
-def test_things_registered_in_a_known_directory(registry):
+def test_things_registered_in_a_known_directory(registry, wait_for):
     # discoverer-fetch-tdd, exploration via a directory: listing first, then its events
     events: list[tuple[str, str]] = []
 

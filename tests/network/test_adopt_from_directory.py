@@ -17,16 +17,7 @@ from wott_hub.network import DirectoryConfig, DiscoveryConfig, Registration
 TOKEN = "t"
 
 
-async def wait_for(predicate, timeout: float = 10.0, what: str = "condition") -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while not predicate():
-        if loop.time() > deadline:
-            raise AssertionError(f"{what}: not met within {timeout} s")
-        await asyncio.sleep(0.05)
-
-
-def test_adopted_from_a_known_directory_and_lost_when_deleted_there(scene):
+def test_adopted_from_a_known_directory_and_lost_when_deleted_there(scene, wait_for):
     async def scenario() -> Any:
         server = await DirectoryServer(Directory(DirectorySettings(token=TOKEN))).start()
         a = Hub(HubConfig(name="a", http_port=0, ws_port=0, history=False, devices=(scene("pad"),),

@@ -26,15 +26,6 @@ def run(coro: Any, timeout: float = 60) -> Any:
     return asyncio.run(asyncio.wait_for(coro, timeout))
 
 
-async def wait_for(predicate, timeout: float = 10.0, what: str = "condition") -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while not await predicate():
-        if loop.time() > deadline:
-            raise AssertionError(f"{what}: not met within {timeout} s")
-        await asyncio.sleep(0.1)
-
-
 async def fleet_directory() -> tuple[DirectoryServer, DirectoryClient]:
     server = await DirectoryServer(Directory(DirectorySettings(token=TOKEN, purge_interval=0.2))).start()
     return server, DirectoryClient(server.url)
@@ -95,7 +86,7 @@ step = [{{ kind = "press", at = [11.25, 11.25, 4.0], start_s = 0.5, duration_s =
 """
 
 
-def test_the_things_of_a_hub_that_dies_expire(tmp_path):
+def test_the_things_of_a_hub_that_dies_expire(tmp_path, wait_for):
     async def scenario() -> None:
         server, fleet = await fleet_directory()
         (tmp_path / "hub.toml").write_text(CONFIG.format(url=server.url, token=TOKEN))
