@@ -113,7 +113,7 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
             listed = (await http.get(f"{hub.http_url}/things")).json()
             assert "urn:wott-hub:device:skin-7" in {t["id"] for t in listed}
             mesh = (await http.get(f"{hub.td_url('skin-7')}/properties/skinNodes")).json()
-            source_mesh = (await http.get(f"{sim_url}things/pad-1/properties/skinNodes")).json()
+            source_mesh = (await http.get(f"{sim_url}wot/pad-1/properties/skinNodes")).json()
             assert mesh == source_mesh
 
             # a press on the device is an event of the re-exposed device

@@ -35,6 +35,7 @@ from wott_hub.examples import example_device
 from wott_hub.sim.scene import Scene
 from wott_hub.tactile import FrameProcessor, ProcessingParams, TactileFrame
 from wott_hub.td.builder import build_tactile_td, static_property_values
+from wott_hub.td.forms import PREFIX
 
 EVENT = "skinDeformedDetection"
 
@@ -154,10 +155,10 @@ async def main(args: argparse.Namespace) -> None:
     port = sockets[0].getsockname()[1]
     base = f"http://{args.host}:{port}/"
     device = Device(args.shape)
-    td = build_tactile_td(device.desc, base=base)  # forms: things/<device>/properties|events/<name>
+    td = build_tactile_td(device.desc, base=base)  # forms: /wot/<device>/properties|events/<name>
     td["id"] = args.id
     td["title"] = args.name
-    thing = f"/things/{device.desc.id}"
+    thing = f"{PREFIX}/{device.desc.id}"
     k = {"device": device, "td": td}
     server = HTTPServer(Application([
         ("/td", TDHandler, k),

@@ -15,7 +15,8 @@ import tornado.web
 from tornado.iostream import StreamClosedError
 
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
-from wott_hub.td.builder import CONTEXT_PATH, tactile_context
+from wott_hub.td.builder import tactile_context
+from wott_hub.td.forms import CONTEXT_PATH
 
 from .context import ServingContext
 from .forms import PREFIX

@@ -4,24 +4,16 @@ from __future__ import annotations
 
 import copy
 import json
-from collections.abc import Callable
 from functools import cache
 from importlib import resources
 from typing import Any
 
 from wott_hub.tactile.device import DeviceDescription
 
+from .forms import FormFactory, FormLayout
 from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
 
-CONTEXT_PATH = "contexts/tactile-v1.jsonld"
-
-__all__ = [
-    "CONTEXT_PATH", "FormFactory", "build_tactile_td", "hub_forms", "static_property_values",
-    "tactile_context",
-]
-
-FormFactory = Callable[[str, str, dict[str, Any]], list[dict[str, Any]]]
-"""(kind 'property'|'event', affordance name, affordance) -> forms."""
+__all__ = ["build_tactile_td", "static_property_values", "tactile_context"]
 
 
 @cache
@@ -29,29 +21,6 @@ def tactile_context() -> dict[str, Any]:
     """The Tactile vocabulary's JSON-LD context document (served by the hub)."""
     text = resources.files("wott_hub.td").joinpath("context/tactile-v1.jsonld").read_text()
     return json.loads(text)
-
-
-def hub_forms(thing_path: str) -> FormFactory:
-    """Forms of the hub's HTTP layout: GET to read, SSE to observe and subscribe.
-
-    Every form states its ``op``, ``htv:methodName`` and, for streams, its
-    ``subprotocol``: node-wot picks forms by these and fails on guesses.
-    """
-
-    def forms(kind: str, name: str, affordance: dict[str, Any]) -> list[dict[str, Any]]:
-        if kind == "property":
-            href = f"{thing_path}/properties/{name}"
-            out = [{"href": href, "op": ["readproperty"], "htv:methodName": "GET",
-                    "contentType": "application/json"}]
-            if affordance.get("observable"):
-                out.append({"href": f"{href}/observe", "op": ["observeproperty"],
-                            "htv:methodName": "GET", "subprotocol": "sse",
-                            "contentType": "text/event-stream"})
-            return out
-        return [{"href": f"{thing_path}/events/{name}", "op": ["subscribeevent"],
-                 "htv:methodName": "GET", "subprotocol": "sse", "contentType": "text/event-stream"}]
-
-    return forms
 
 
 def build_tactile_td(
@@ -63,13 +32,15 @@ def build_tactile_td(
 ) -> dict[str, Any]:
     """The device's TD 1.1 document with the Tactile vocabulary.
 
-    ``context_url`` is where the Tactile JSON-LD context is served (by default
-    the hub at ``base``). TD 1.1 allows only prefix maps inline, so the ``tac``
-    prefix is also given inline for processors that do not dereference.
-    ``forms`` lets a binding (the servient) supply its own forms.
+    Forms follow the hub's layout at ``base`` (``wott_hub.td.forms``) unless a
+    binding supplies its own ``forms``. ``context_url`` is where the Tactile
+    JSON-LD context is served (by default the hub at ``base``). TD 1.1 allows
+    only prefix maps inline, so the ``tac`` prefix is also given inline for
+    processors that do not dereference.
     """
-    forms = forms or hub_forms(f"things/{desc.id}")
-    ctx: list[Any] = [*TD_CONTEXT, context_url or f"{base}{CONTEXT_PATH}", {"tac": TACTILE_NS}]
+    layout = FormLayout(base.rstrip("/"))
+    forms = forms or layout.factory(desc.id)
+    ctx: list[Any] = [*TD_CONTEXT, context_url or layout.context_url, {"tac": TACTILE_NS}]
     properties = {}
     for name, schema in PROPERTIES.items():
         aff = copy.deepcopy(schema)
