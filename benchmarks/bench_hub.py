@@ -841,9 +841,18 @@ async def run_all(args) -> str:
             sent, got, p50, p99 = t
             return f"{ms(p50)} / {ms(p99)} ({got}/{sent})"
 
+        repeat_notes = []
         for n in (1, 8) if quick else (1, 8, 32):
             print(f"latency: {n} devices ...", flush=True)
             r = await latency_ours(n, dur, tmp, with_wotpy=n <= 8)
+            if n == 32:  # the target's point: repeated, the median run shown (this machine is noisy)
+                runs = [r] + [await latency_ours(n, dur, tmp, with_wotpy=False) for _ in range(2)]
+                runs.sort(key=lambda x: x["sse"][3])
+                r = runs[1]
+                repeat_notes.append(
+                    f"{n} devices, {len(runs)} runs (the median run by SSE p99 is shown): SSE p99 "
+                    + ", ".join(ms(x["sse"][3]) for x in runs) + " ms; hub WS p99 "
+                    + ", ".join(ms(x["ws"][3]) for x in runs) + " ms.")
             # plain wotpy saturates at 8 devices already (and exposing 32 there is O(N^3))
             p = await latency_plain(n, dur) if n <= 8 else None
             rows.append([n, f"{r['sse'][0] / dur:.0f} / {n * 120}", cell(r["sse"]), cell(r["ws"]),
@@ -877,6 +886,7 @@ async def run_all(args) -> str:
             "`ExposedThing.emit_event` of the same payloads (no processing) -> wotpy client.\n\n"
             + markdown_table(["devices", "frames/s processed / offered", "hub SSE", "hub WS",
                               "hub WS, wotpy client", "plain wotpy WS, wotpy client"], rows)
+            + "".join(f"\n\n{note}" for note in repeat_notes)
             + "\n\nStages (ms, p50 / p99). processing = FrameProcessor (deformed nodes, contacts, "
               "actions); encoding = payload dict + JSON; fan-out = event plane, queue, SSE/WS framing, "
               "write to the socket; transport = socket to the client's parser (httpx-sse, or a "

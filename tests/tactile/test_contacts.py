@@ -24,9 +24,15 @@ def test_both_searches_find_scipys_components(mask, walk):
         return
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(contacts, "WALK_MAX_NODES", BIG.n_nodes if walk else 0)
-        n, labels = contacts.patch_labels(BIG, nodes)
+        grouped, sizes = contacts.group_patches(BIG, nodes)
     ref_n, ref = connected_components(BIG.adjacency[nodes][:, nodes], directed=False)
-    assert n == ref_n and same_partition(labels, ref)
+    assert len(sizes) == ref_n and sizes.sum() == len(nodes)
+    labels = np.repeat(np.arange(len(sizes)), sizes)
+    assert same_partition(labels, ref[np.searchsorted(nodes, grouped)])
+    firsts = grouped[np.cumsum(sizes) - sizes]
+    assert np.all(np.diff(firsts) > 0)  # patches in order of their smallest node
+    for patch in np.split(grouped, np.cumsum(sizes)[:-1]):
+        assert np.all(np.diff(patch) > 0)  # ascending within each
 
 
 def test_each_patch_gets_its_own_statistics():

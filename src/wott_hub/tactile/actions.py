@@ -16,6 +16,7 @@ every device family. Each action is emitted once when its condition first holds:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,11 @@ class ActionParams:
     rest_speed_mm_s: float = 5.0
     pinch_mm: float = 3.0
     collision_speed_mm_s: float = 150.0
+
+
+def _norm(v: np.ndarray) -> float:
+    """Length of a 3-vector: np.linalg.norm's generality costs more than the sum itself here."""
+    return math.sqrt(float(v @ v))
 
 
 class ActionDetector:
@@ -77,13 +83,13 @@ class ActionDetector:
             self._still_since = t_ns
         else:
             dt = max((t_ns - (self._prev_ns or t_ns)) / 1e9, 1e-9)
-            speed = float(np.linalg.norm(main.location - self._prev_loc)) / dt
+            speed = _norm(main.location - self._prev_loc) / dt
             if speed > p.rest_speed_mm_s:
                 self._still_since = None
             elif self._still_since is None:
                 self._still_since = t_ns
-            moved = float(np.linalg.norm(main.location - self._anchor))
-            sheared = float(np.linalg.norm(main.shear)) > p.slip_shear_ratio * max(main.depth, 1e-9)
+            moved = _norm(main.location - self._anchor)
+            sheared = _norm(main.shear) > p.slip_shear_ratio * max(main.depth, 1e-9)
             if not self._slipping and (moved > p.slip_mm or sheared):
                 out.append("slip")
                 self._slipping = True
@@ -108,7 +114,7 @@ class ActionDetector:
         if len(contacts) < 2:
             self._pinch_d0 = None
             return
-        d = float(np.linalg.norm(contacts[0].location - contacts[1].location))
+        d = _norm(contacts[0].location - contacts[1].location)
         if self._pinch_d0 is None:
             self._pinch_d0 = d
         elif not self._pinched and self._pinch_d0 - d > self.p.pinch_mm:

@@ -9,12 +9,12 @@ import numpy as np
 
 from .mesh import SkinMesh
 
-__all__ = ["Contact", "ForceModel", "WinklerForceModel", "find_contacts", "patch_labels"]
+__all__ = ["Contact", "ForceModel", "WinklerForceModel", "find_contacts", "group_patches"]
 
 # Above this many deformed nodes SciPy's compiled search beats the Python walk (its fixed cost,
 # ~0.1 ms of sparse-matrix set-up, is paid back); below it the walk is 2-20x faster.
 # Measured in docs/processing.md ("Finding contact patches").
-WALK_MAX_NODES = 300
+WALK_MAX_NODES = 400
 
 
 class ForceModel(Protocol):
@@ -56,30 +56,37 @@ class WinklerForceModel:
         return self.node_stiffness[nodes] @ displacement[nodes]
 
 
-def patch_labels(mesh: SkinMesh, nodes: np.ndarray) -> tuple[int, np.ndarray]:
-    """Connected components of the mesh graph restricted to ``nodes``: (count, label per node).
+def group_patches(mesh: SkinMesh, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Connected components of the mesh graph restricted to ``nodes`` (ascending).
 
-    Labels are numbered in order of each component's first node in ``nodes``.
+    Returns ``nodes`` grouped by component (ascending within each, components
+    in order of their smallest node) and the size of each component.
     """
     if len(nodes) > WALK_MAX_NODES:
         from scipy.sparse.csgraph import connected_components
 
-        return connected_components(mesh.adjacency[nodes][:, nodes], directed=False)
+        n, labels = connected_components(mesh.adjacency[nodes][:, nodes], directed=False)
+        return nodes[np.argsort(labels, kind="stable")], np.bincount(labels, minlength=n)
     neighbours = mesh.neighbour_lists
-    label = dict.fromkeys(nodes.tolist(), -1)
-    n = 0
-    for start in label:
-        if label[start] >= 0:
+    remaining = set(nodes.tolist())
+    grouped: list[int] = []
+    sizes: list[int] = []
+    for start in nodes.tolist():
+        if start not in remaining:
             continue
-        label[start] = n
+        remaining.discard(start)
+        patch = [start]
         stack = [start]
         while stack:
-            for v in neighbours[stack.pop()]:
-                if label.get(v) == -1:
-                    label[v] = n
-                    stack.append(v)
-        n += 1
-    return n, np.fromiter(label.values(), dtype=np.int64, count=len(label))
+            found = remaining.intersection(neighbours[stack.pop()])
+            if found:
+                remaining -= found
+                patch.extend(found)
+                stack.extend(found)
+        patch.sort()
+        grouped += patch
+        sizes.append(len(patch))
+    return np.array(grouped, dtype=np.int64), np.array(sizes, dtype=np.int64)
 
 
 def find_contacts(
@@ -100,10 +107,7 @@ def find_contacts(
     """
     if deformed.size == 0:
         return []
-    n_comp, labels = patch_labels(mesh, deformed)
-    order = np.argsort(labels, kind="stable")
-    nodes = deformed[order]  # grouped by patch, ascending within each
-    counts = np.bincount(labels, minlength=n_comp)
+    nodes, counts = group_patches(mesh, deformed)
     starts = np.concatenate(([0], np.cumsum(counts[:-1])))
     w = intensity[nodes]
     total = np.add.reduceat(w, starts)
