@@ -12,8 +12,8 @@ from .mesh import SkinMesh
 __all__ = ["Contact", "ForceModel", "WinklerForceModel", "find_contacts", "group_patches"]
 
 # Above this many deformed nodes SciPy's compiled search beats the Python walk (its fixed cost,
-# ~0.1 ms of sparse-matrix set-up, is paid back); below it the walk is 2-20x faster.
-# Measured in docs/processing.md ("Finding contact patches").
+# ~0.1 ms of sparse-matrix set-up, is paid back); below it the walk is 1.4-20x faster.
+# Measured by `wott-hub bench processing` (docs/benchmarks.md, "Finding contact patches").
 WALK_MAX_NODES = 400
 
 
