@@ -66,9 +66,10 @@ def registry() -> Registry:
     return Registry(only=["taxel"])
 
 
-async def play(driver, n_frames: int):
-    """(frame, ground truth) pairs for the first n frames, checked against the simulator's record."""
-    pairs = []
+async def play(driver, n_frames: int, pairs: list | None = None):
+    """(frame, ground truth) pairs for the first n frames, checked against the simulator's record
+    (appended to ``pairs`` as they come, if given)."""
+    pairs = [] if pairs is None else pairs
     async for f in driver.frames():
         truth = driver.simulator.truth(driver.last_seq)
         assert truth is not None
@@ -148,12 +149,17 @@ def test_the_driver_survives_its_board_being_unplugged(tmp_path):
         while not driver.health().reason.startswith("cannot open"):  # the path is gone: re-opens fail
             await asyncio.sleep(0.005)
         states.append(driver.health())
-        await asyncio.sleep(0.05)  # let the consumer drain frames read before the unplug
-        sim.replug()  # the board restarts at seq 0: its old ground truth is gone
+        # the consumer must have every frame decoded before the unplug: the replugged board restarts
+        # at seq 0 and its old ground truth is gone
+        while len(pairs) < driver.counters.frames:
+            await asyncio.sleep(0.005)
+        sim.replug()
+
+    pairs: list = []
 
     async def main():
         side = asyncio.create_task(unplug_and_replug())
-        pairs = await play(driver, 60)
+        await asyncio.wait_for(play(driver, 60, pairs), 60)
         await side
         return pairs
 
