@@ -1,7 +1,8 @@
 import numpy as np
 from scipy.spatial import cKDTree
-from wott_driver_barrel.simulator import BarrelSimulator, RenderSettings, SimulatedCameras
+from wott_driver_barrel.simulator import BarrelSimulator, RenderSettings
 from wott_vision.markers import detect_markers
+from wott_vision.simulated import SimulatedSource
 
 from wott_hub.sim.scene import Scene
 
@@ -42,7 +43,7 @@ def test_a_press_moves_the_pressed_markers_towards_the_centre(layout):
 
 
 def test_simulated_cameras_end_with_a_non_looping_scene(layout):
-    cams = SimulatedCameras(BarrelSimulator(layout, Scene.from_dict(PRESS)), fps=20, realtime=False)
+    cams = SimulatedSource(BarrelSimulator(layout, Scene.from_dict(PRESS)), fps=20, realtime=False)
     n = 0
     while True:
         ok, frames = cams.read()

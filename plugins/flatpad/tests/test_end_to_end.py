@@ -12,7 +12,8 @@ from wott_driver_flatpad.estimator import PadEstimator
 from wott_driver_flatpad.evaluation import play_scene
 from wott_driver_flatpad.geometry import PadLayout
 from wott_driver_flatpad.settings import demo_scene_path
-from wott_driver_flatpad.simulator import PadSimulator, RenderSettings, SimulatedCamera
+from wott_driver_flatpad.simulator import PadSimulator, RenderSettings
+from wott_vision.simulated import SimulatedSource
 
 from wott_hub.sim.scene import Scene
 
@@ -56,7 +57,7 @@ def test_small_grid_press_and_pinch():
 def test_simulated_camera_is_a_video_capture():
     lay = PadLayout(8, 8, pitch_mm=2.0, marker_radius_mm=0.4)
     scene = Scene.from_dict({"step": [{"kind": "tap", "at": [7.0, 7.0, 0.0], "start_s": 0.05}]})
-    cam = SimulatedCamera(PadSimulator(lay, scene, RenderSettings(noise_std=0.0)), fps=50.0, realtime=False)
+    cam = SimulatedSource(PadSimulator(lay, scene, RenderSettings(noise_std=0.0)), fps=50.0, realtime=False)
     assert cam.isOpened()
     frames = []
     while True:

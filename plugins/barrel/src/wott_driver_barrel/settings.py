@@ -129,7 +129,7 @@ def open_barrel(device_id: str, settings: dict[str, Any], *, max_frames: int | N
     from .driver import BarrelDriver, CameraPair
     from .estimator import BarrelEstimator
     from .model import DisplacementModel, default_model_path
-    from .simulator import BarrelSimulator, RenderSettings, SimulatedCameras
+    from .simulator import BarrelSimulator, RenderSettings
 
     s = defaults(SCHEMA, settings)
     check_material(s)
@@ -148,11 +148,8 @@ def open_barrel(device_id: str, settings: dict[str, Any], *, max_frames: int | N
     source = s["source"]
     if source == "sim":
         render = section(RenderSettings, RENDER_SCHEMA, s.get("render"), "render")
-
-        def simulated(scene, fps, realtime):
-            return SimulatedCameras(BarrelSimulator(layout, scene, render), fps, realtime=realtime)
-
-        open_source, name = simulator_source(s, demo_scene_path(), simulated)
+        open_source, name = simulator_source(s, demo_scene_path(),
+                                             lambda scene: BarrelSimulator(layout, scene, render))
     else:
         if not (isinstance(source, list | tuple) and len(source) == 2):
             raise DriverError(f"source: \"sim\" or [bottom, top] camera sources, got {source!r}")

@@ -12,7 +12,6 @@ lighting changes, lens vignetting (docs/barrel-vision.md).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +20,7 @@ from wott_hub.sim.scene import Scene
 
 from .geometry import BarrelLayout
 
-__all__ = ["BarrelSimulator", "RenderSettings", "SimulatedCameras"]
+__all__ = ["BarrelSimulator", "RenderSettings"]
 
 
 @dataclass(frozen=True)
@@ -74,59 +73,3 @@ class BarrelSimulator:
         """(images, truth) at scene time ``t_s``."""
         truth = self.truth(t_s)
         return self.render_displacement(truth), truth
-
-
-class SimulatedCameras:
-    """Both simulated cameras as one reader: ``read()`` -> (True, (bottom, top)) at ``fps``.
-
-    ``realtime`` paces reads like cameras (frame k is due k / fps after the first
-    read; a slow reader skips frames, as a camera would drop them); otherwise
-    frames come as fast as read, still 1 / fps apart in scene time. A scene that
-    does not loop ends: ``read()`` returns (False, None) and ``ended`` is true.
-    ``t_s`` and ``truth`` describe the frame last read.
-    """
-
-    def __init__(self, simulator: BarrelSimulator, fps: float = 30.0, *, realtime: bool = True,
-                 max_frames: int | None = None) -> None:
-        if not (np.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be a positive number, got {fps!r}")
-        self.simulator = simulator
-        self.fps = float(fps)
-        self.realtime = realtime
-        self.max_frames = max_frames
-        self.frames_read = 0
-        self.ended = False
-        self.failure = ""
-        self.t_s = 0.0
-        self.truth: np.ndarray | None = None
-        self._k = 0
-        self._t0: float | None = None
-
-    def isOpened(self) -> bool:  # noqa: N802 - VideoCapture's name
-        return not self.ended
-
-    def read(self) -> tuple[bool, tuple[np.ndarray, ...] | None]:
-        scene = self.simulator.scene
-        if self.realtime:
-            now = time.monotonic()
-            if self._t0 is None:
-                self._t0 = now
-            due = self._t0 + self._k / self.fps
-            if now < due:
-                time.sleep(due - now)
-            else:
-                self._k = max(self._k, int((now - self._t0) * self.fps))  # skip missed frames
-        t_s = self._k / self.fps
-        if (not scene.loop and t_s > scene.duration_s) or (
-                self.max_frames is not None and self.frames_read >= self.max_frames):
-            self.ended = True
-            self.failure = f"scene {scene.name!r} ended after {self.frames_read} frames"
-            return False, None
-        images, truth = self.simulator.render(t_s)
-        self.t_s, self.truth = t_s, truth
-        self._k += 1
-        self.frames_read += 1
-        return True, images
-
-    def release(self) -> None:
-        return None

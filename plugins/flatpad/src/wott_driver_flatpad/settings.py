@@ -120,7 +120,7 @@ def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None
     """A ``FlatPadDriver`` for these settings (nothing is opened until it runs)."""
     from .driver import FlatPadDriver
     from .estimator import PadEstimator
-    from .simulator import PadSimulator, SimulatedCamera
+    from .simulator import PadSimulator
 
     s = defaults(SCHEMA, settings)
     check_material(s)
@@ -138,10 +138,8 @@ def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None
             estimator.depth_model = calibrate(layout, render, parallax=estimator.solver.parallax)
     source = s["source"]
     if source == "sim":
-        def simulated(scene, fps, realtime):
-            return SimulatedCamera(PadSimulator(layout, scene, render), fps, realtime=realtime)
-
-        open_source, name = simulator_source(s, demo_scene_path(), simulated)
+        open_source, name = simulator_source(s, demo_scene_path(),
+                                             lambda scene: PadSimulator(layout, scene, render))
     else:
         def open_source():
             from wott_vision.camera import open_source as open_camera

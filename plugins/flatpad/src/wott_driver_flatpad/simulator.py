@@ -14,13 +14,12 @@ same area, which is all the depth cue uses). The shared renderer (``wott_vision.
 markers with blur and sensor noise, so the real detector and tracker run on
 the result.
 
-``SimulatedCamera`` wraps it as a VideoCapture-like reader, so the driver
-drives a simulated pad exactly as it drives a USB camera.
+``wott_vision.simulated.SimulatedSource`` reads it like a camera, so the
+driver drives a simulated pad exactly as it drives a USB camera.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +29,7 @@ from wott_hub.tactile import flat_pad
 
 from .geometry import PadLayout
 
-__all__ = ["PadSimulator", "RenderSettings", "SimulatedCamera"]
+__all__ = ["PadSimulator", "RenderSettings"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,58 +93,3 @@ class PadSimulator:
         img = render_markers(px, radius, size=(o.height, o.width), blur_sigma=r.blur_sigma,
                              noise_std=r.noise_std, rng=self._rng)
         return img, truth
-
-
-class SimulatedCamera:
-    """VideoCapture-like reader over a ``PadSimulator`` at ``fps``.
-
-    ``realtime`` paces ``read()`` like a camera (frame k is due k / fps after
-    the first read, missed frames are skipped); otherwise frames come as fast
-    as they are read, still spaced 1 / fps in scene time. A scene that does not
-    loop ends: ``read()`` then returns ``(False, None)`` and ``ended`` is true.
-    ``t_s`` and ``truth`` describe the frame last read (for tests and benchmarks).
-    """
-
-    def __init__(self, simulator: PadSimulator, fps: float = 60.0, *, realtime: bool = True,
-                 start_s: float = 0.0) -> None:
-        if not (np.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be a positive number, got {fps!r}")
-        self.simulator = simulator
-        self.fps = float(fps)
-        self.realtime = realtime
-        self.start_s = float(start_s)
-        self.frame_index = 0
-        self.t_s = self.start_s
-        self.truth: np.ndarray | None = None
-        self.ended = False
-        self._opened = True
-        self._mono0: float | None = None
-
-    def isOpened(self) -> bool:  # noqa: N802 - the cv2.VideoCapture spelling
-        return self._opened
-
-    def read(self) -> tuple[bool, np.ndarray | None]:
-        if not self._opened or self.ended:
-            return False, None
-        period = 1.0 / self.fps
-        if self.realtime:
-            now = time.monotonic()
-            if self._mono0 is None:
-                self._mono0 = now
-            due = self._mono0 + self.frame_index * period
-            if due > now:
-                time.sleep(due - now)
-            elif now - due > period:
-                self.frame_index = int((now - self._mono0) / period)
-        scene = self.simulator.scene
-        t = self.start_s + self.frame_index * period
-        if not scene.loop and t > scene.duration_s:
-            self.ended = True
-            return False, None
-        img, truth = self.simulator.render(t)
-        self.t_s, self.truth = t, truth
-        self.frame_index += 1
-        return True, img
-
-    def release(self) -> None:
-        self._opened = False

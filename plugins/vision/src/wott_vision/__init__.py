@@ -8,6 +8,7 @@ no camera pays nothing for this package.
 - ``wott_vision.tracking``: ``MarkerTracker`` (nearest-neighbour association to a reference grid)
 - ``wott_vision.render``: ``render_markers`` (anti-aliased synthetic marker images for simulators)
 - ``wott_vision.camera``: ``open_source`` (OpenCV ``VideoCapture`` over a device, file or URL)
+- ``wott_vision.simulated``: ``SimulatedSource`` (a simulator read like a camera)
 """
 
 __all__: list[str] = []

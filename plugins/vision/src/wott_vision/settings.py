@@ -19,6 +19,7 @@ from wott_hub.sim.scene import Scene, SceneError
 from wott_hub.tactile import MATERIALS
 
 from .driver import FrameReader
+from .simulated import SimulatedSource, Simulator
 
 __all__ = ["backoff", "check_material", "defaults", "section", "simulator_source"]
 
@@ -60,12 +61,13 @@ def backoff(s: dict[str, Any]) -> Backoff:
 
 
 def simulator_source(
-    s: dict[str, Any], demo_scene: Path, make_reader: Callable[[Scene, float, bool], FrameReader],
+    s: dict[str, Any], demo_scene: Path, make_simulator: Callable[[Scene], Simulator],
 ) -> tuple[Callable[[], FrameReader], str]:
-    """(``open_source``, its name) for ``source = "sim"``: ``make_reader(scene, fps, realtime)``.
+    """(``open_source``, its name) for ``source = "sim"``: ``make_simulator(scene)`` read like
+    a camera at the ``fps`` setting (``SimulatedSource``).
 
     The scene is loaded now, so a bad one is refused when the device opens; each (re)open
-    starts a fresh reader from the scene's beginning.
+    starts a fresh simulator from the scene's beginning.
     """
     try:
         scene = Scene.load(s["scene"] or demo_scene)
@@ -74,4 +76,8 @@ def simulator_source(
     fps, realtime = float(s["fps"]), bool(s["realtime"])
     if not fps > 0:
         raise DriverError(f"fps: must be positive, got {fps}")
-    return (lambda: make_reader(scene, fps, realtime)), f"simulator ({scene.name})"
+
+    def open_source() -> SimulatedSource:
+        return SimulatedSource(make_simulator(scene), fps, realtime=realtime)
+
+    return open_source, f"simulator ({scene.name})"
