@@ -46,14 +46,10 @@ class BarrelSimulator:
         self.scene = scene
         self.settings = render or RenderSettings()
         self._rng = np.random.default_rng(self.settings.seed)
-        self._rest = np.zeros_like(layout.mesh.nodes)
 
     def truth(self, t_s: float) -> np.ndarray:
         """Ground-truth node displacement (N, 3) mm at scene time ``t_s``."""
-        mesh = self.layout.mesh
-        if not self.scene.indenters_at(t_s, mesh):
-            return self._rest
-        return self.scene.displacement_at(t_s, mesh)
+        return self.scene.displacement_at(t_s, self.layout.mesh)
 
     def render_displacement(self, displacement: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """One uint8 (H, W) image per camera for a node displacement (None: at rest)."""

@@ -56,17 +56,12 @@ class PadSimulator:
 
     def truth(self, t_s: float) -> np.ndarray:
         """Ground-truth displacement (N x 3 mm) of the markers at scene time ``t_s``."""
-        if not self.scene.indenters_at(t_s, self.layout.mesh):
-            return np.zeros((self.layout.n_markers, 3))
         return self.scene.displacement_at(t_s, self.layout.mesh)
 
     def area_scale(self, t_s: float) -> np.ndarray:
         """det(∂p/∂X0) (px² per mm²) of the rest-surface-to-image mapping at each marker."""
         lay, k, o = self.layout, self._k, self.layout.optics
-        if not self.scene.indenters_at(t_s, self._fine):
-            d = np.zeros_like(self._fine.nodes)
-        else:
-            d = self.scene.displacement_at(t_s, self._fine)
+        d = self.scene.displacement_at(t_s, self._fine)
         fr, fc = (lay.rows - 1) * k + 1, (lay.cols - 1) * k + 1
         px = o.project(self._fine.nodes + d, lay.axis_mm).reshape(fr, fc, 2)
         h = lay.pitch_mm / k
