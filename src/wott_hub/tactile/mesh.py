@@ -136,7 +136,7 @@ class SkinMesh:
         return indices[indptr[node] : indptr[node + 1]]
 
     # -- geometry ------------------------------------------------------------
-    def _triangles(self) -> np.ndarray:
+    def triangles(self) -> np.ndarray:
         """The cells as triangles (quads split along their 0-2 diagonal)."""
         if self.cells.shape[1] == 3:
             return self.cells
@@ -157,7 +157,7 @@ class SkinMesh:
     @cached_property
     def cell_areas(self) -> np.ndarray:
         p = self.nodes
-        t = self._triangles()
+        t = self.triangles()
         a = 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
         if self.cells.shape[1] == 4:
             a = a[: self.n_cells] + a[self.n_cells :]

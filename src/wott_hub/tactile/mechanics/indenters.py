@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..indentation import nearest_node
 from .model import ContactError, MechanicsError, SkinModel
 
 __all__ = ["FlatPunch", "Press", "PressGeometry", "Sphere", "press_geometry", "press_on"]
@@ -122,7 +123,7 @@ def press_on(
     p = np.asarray(point, dtype=float)
     if p.shape != (3,) or not np.isfinite(p).all():
         raise MechanicsError(f"press point must be a finite [x, y, z], got {point!r}")
-    k = int(np.argmin(np.linalg.norm(mesh.nodes - p, axis=1)))
+    k = nearest_node(mesh, p)
     n = mesh.normals[k]
     if not np.linalg.norm(n) > 0.5:
         raise MechanicsError(f"node {k} nearest to {p.tolist()} has no surface normal (it is in no cell)")

@@ -27,7 +27,6 @@ class ProbeSet:
     weights: np.ndarray  # (P, 3) barycentric weights, rows sum to 1
     rest: np.ndarray  # (P, 3) rest position, mm
     normals: np.ndarray  # (P, 3) interpolated outward unit normal (zero where undefined)
-    per_edge: int  # probes per edge (1: the nodes only)
 
     def __len__(self) -> int:
         return len(self.nodes)
@@ -35,8 +34,7 @@ class ProbeSet:
 
 def build_probes(mesh: SkinMesh, spacing_mm: float) -> ProbeSet:
     """Nodes, then s − 1 points inside each edge, then the interior grid of each triangle."""
-    c = mesh.cells
-    tris = c if c.shape[1] == 3 else np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]])
+    tris = mesh.triangles()
     p = mesh.nodes
     n = mesh.n_nodes
     node_rows = np.arange(n)
@@ -67,4 +65,4 @@ def build_probes(mesh: SkinMesh, spacing_mm: float) -> ProbeSet:
     nrm = np.einsum("pk,pkc->pc", weights_a, mesh.normals[nodes_a])
     norm = np.linalg.norm(nrm, axis=1, keepdims=True)
     nrm = np.divide(nrm, norm, out=np.zeros_like(nrm), where=norm > 1e-12)
-    return ProbeSet(nodes_a, weights_a, rest, nrm, s)
+    return ProbeSet(nodes_a, weights_a, rest, nrm)
