@@ -129,7 +129,7 @@ class ContactSolver:
         x0 = self.solve(r)
         live = [k for k, g in enumerate(geoms) if g.press.force_n != 0.0]
         if not live:
-            return self._assemble(x0, geoms, {}, _Rows.empty(), np.zeros(0), {}, 0, True)
+            return self._assemble(x0, np.zeros(self.n), geoms, {}, _Rows.empty(), np.zeros(0), {}, 0, True)
         lg = [geoms[k] for k in live]
         k_pen = [1.0 / (REGULARISATION * self._flexibility(g)) for g in lg]
         sticky = any(g.press.sticks for g in lg)
@@ -184,9 +184,9 @@ class ContactSolver:
                     monotone = True  # cycling: from now on only add probes, which must terminate
             seen.add(key)
             active = new_active
-        x, lam, depths, rows = xn, lam, dn, rows
-        per_press = {k: (depths[i], lg[i].probes[active[i]]) for i, k in enumerate(live)}
-        return self._assemble(x, geoms, {k: i for i, k in enumerate(live)}, rows, lam, per_press, it, done)
+        per_press = {k: (dn[i], lg[i].probes[active[i]]) for i, k in enumerate(live)}
+        live_index = {k: i for i, k in enumerate(live)}
+        return self._assemble(xn, qn, geoms, live_index, rows, lam, per_press, it, done)
 
     def _flexibility(self, g: PressGeometry) -> np.ndarray:
         """Σ_j w_j² aᵀ diag(A_j)⁻¹ a per candidate probe: its compliance if its nodes were alone."""
@@ -214,8 +214,9 @@ class ContactSolver:
         up = np.einsum("pk,pkc->pc", self.probe_weights[g.probes], xn[self.probe_slots[g.probes]])
         return up @ g.press.axis - (depth - g.phi)
 
-    def _assemble(self, x, geoms, live_index, rows, lam, per_press, iterations, converged) -> ContactResult:
-        nodal = rows.nodal(self.n, lam)
+    def _assemble(self, x, nodal, geoms, live_index, rows, lam, per_press, iterations,
+                  converged) -> ContactResult:
+        """``nodal``: Bᵀλ, the contact forces on every dof (the last Newton step has it)."""
         forces, depths, active = [], [], []
         for k, g in enumerate(geoms):
             if k not in live_index:
