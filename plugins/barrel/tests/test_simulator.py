@@ -36,7 +36,7 @@ def test_a_press_moves_the_pressed_markers_towards_the_centre(layout):
     # every marker that moved and stays clear of its neighbours is detected where it went
     found = detect_markers(bottom)
     gap = cKDTree(moved).query(moved, k=2)[0][:, 1]
-    radius = layout.marker_radii(truth)[0]
+    radius = layout.points_and_radii(truth)[1][0]
     clear = (np.hypot(*(moved - ref).T) > 0.5) & (gap > 2 * radius + 2)
     assert clear.sum() >= 1
     assert cKDTree(found).query(moved[clear])[0].max() < 0.1

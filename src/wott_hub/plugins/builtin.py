@@ -16,6 +16,7 @@ from wott_hub.tactile.materials import MATERIALS
 from . import wot_remote
 from .hookspecs import hookimpl
 from .model import DeviceConfig, FamilyInfo
+from .naming import naming_device
 
 FAMILY = "scene"
 
@@ -67,14 +68,15 @@ def wott_hub_open_device(config: DeviceConfig):
     from wott_hub.sim.scene import Scene, SceneError
 
     s = config.settings
-    try:
-        if "scene" in s:
-            scene = Scene.load(s["scene"])
-        else:
-            scene = Scene.from_dict({"scene": {"name": config.id, "loop": s["loop"]}, "step": s["step"]},
-                                    source=f"device {config.id!r} step")
-    except SceneError as e:
-        raise DriverError(f"device {config.id!r} (family {FAMILY!r}): setting 'scene': {e}") from None
+    with naming_device(config):
+        try:
+            if "scene" in s:
+                scene = Scene.load(s["scene"])
+            else:
+                scene = Scene.from_dict({"scene": {"name": config.id, "loop": s["loop"]}, "step": s["step"]},
+                                        source=f"device {config.id!r} step")
+        except SceneError as e:
+            raise DriverError(f"setting 'scene': {e}") from None
     desc = example_device(s["shape"], device_id=config.id)
     changes: dict[str, Any] = {"family": FAMILY, "title": s.get("title", config.id)}
     if "material" in s:

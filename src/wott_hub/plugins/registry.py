@@ -22,6 +22,7 @@ from wott_hub.drivers.base import Driver, DriverError
 from . import hookspecs
 from .loader import ENTRY_POINT_GROUP, describe_exception, discover, selected_names
 from .model import DeviceConfig, FamilyInfo, PluginInfo
+from .settings import with_defaults
 
 __all__ = ["BUILTIN_PLUGINS", "Registry", "get_registry", "reset_registry"]
 
@@ -220,11 +221,7 @@ class Registry:
         error = best_match(validator.iter_errors(cfg.settings))
         if error is not None:
             raise DriverError(_explain(cfg, error))
-        settings = dict(cfg.settings)
-        for key, prop in (info.schema.get("properties") or {}).items():
-            if key not in settings and isinstance(prop, Mapping) and "default" in prop:
-                settings[key] = copy.deepcopy(prop["default"])
-        return replace(cfg, settings=settings)
+        return replace(cfg, settings=with_defaults(info.schema, cfg.settings))
 
     def open_device(self, cfg: DeviceConfig) -> Driver:
         """Open ``cfg`` through the plugin of its family; DriverError names the setting at fault.

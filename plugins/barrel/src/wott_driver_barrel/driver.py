@@ -16,15 +16,13 @@ the device opens (``settings.open_barrel``).
 from __future__ import annotations
 
 import numpy as np
-from wott_vision.driver import CameraDriver, FrameReader, SourceLost
+from wott_vision.driver import CameraDriver, SourceLost
 
 from wott_hub.drivers.base import Health
 
 from .estimator import BarrelEstimate, BarrelEstimator, ReferenceNotFound
 
-__all__ = ["BarrelDriver", "CameraPair", "PairReader", "SourceLost"]
-
-PairReader = FrameReader  # whose read() gives (bottom, top)
+__all__ = ["BarrelDriver", "CameraPair", "SourceLost"]
 
 
 class CameraPair:

@@ -179,12 +179,6 @@ class FisheyeCamera:
         return ((px[..., 0] >= -margin) & (px[..., 0] <= self.width - 1 + margin)
                 & (px[..., 1] >= -margin) & (px[..., 1] <= self.height - 1 + margin))
 
-    def image_circle(self, radius_px: float, hole_px: float = 0.0) -> np.ndarray:
-        """A (H, W) mask of the annulus around the principal point where markers can appear."""
-        yy, xx = np.mgrid[: self.height, : self.width]
-        r2 = (xx - self.cx) ** 2 + (yy - self.cy) ** 2
-        return (r2 <= radius_px**2) & (r2 >= hole_px**2)
-
 
 def default_cameras(height_mm: float = 260.0, *, offset_mm: float = 6.0, f_px: float = 234.0,
                     width: int = 640, height: int = 480) -> tuple[FisheyeCamera, FisheyeCamera]:
@@ -219,19 +213,25 @@ class BarrelLayout:
         pos = self.markers.positions(displacement)
         return tuple(cam.project(pos) for cam in self.cameras)
 
-    def marker_radii(self, displacement: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-        """Apparent dot radius (M,) px per camera: r_mm * sqrt(|det J|) of the surface projection."""
+    def points_and_radii(
+        self, displacement: np.ndarray | None = None
+    ) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        """(``image_points(displacement)``, apparent dot radii): what a simulator draws, per camera.
+
+        A dot's radius (M,) px is r_mm * sqrt(|det J|) of the surface projection.
+        """
         pos = self.markers.positions(displacement)
         around, along = self.markers.tangents
         h = 0.05
-        out = []
+        points, radii = [], []
         for cam in self.cameras:
             p0 = cam.project(pos)
             j1 = (cam.project(pos + h * around) - p0) / h
             j2 = (cam.project(pos + h * along) - p0) / h
             det = np.abs(j1[:, 0] * j2[:, 1] - j1[:, 1] * j2[:, 0])
-            out.append(np.maximum(self.markers.radius_mm * np.sqrt(det), self.min_radius_px))
-        return tuple(out)
+            points.append(p0)
+            radii.append(np.maximum(self.markers.radius_mm * np.sqrt(det), self.min_radius_px))
+        return tuple(points), tuple(radii)
 
     def jacobians(self, h: float = 0.05) -> tuple[np.ndarray, ...]:
         """d(image px)/d(marker position mm) at rest, (M, 2, 3) per camera."""

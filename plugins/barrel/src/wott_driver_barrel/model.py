@@ -29,6 +29,7 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from wott_vision.markers import as_gray
 
 from wott_hub.drivers.base import DriverError
 
@@ -207,11 +208,7 @@ class DisplacementModel:
         h, w = c.image_hw
         planes = []
         for img in images:
-            g = img
-            if g.ndim == 3:
-                import cv2
-
-                g = cv2.cvtColor(g, cv2.COLOR_BGR2GRAY)
+            g = as_gray(img)
             if g.shape != (h, w):
                 import cv2
 

@@ -56,8 +56,7 @@ class BarrelSimulator:
         from wott_vision.render import render_markers
 
         s = self.settings
-        points = self.layout.image_points(displacement)
-        radii = self.layout.marker_radii(displacement)
+        points, radii = self.layout.points_and_radii(displacement)
         return tuple(
             render_markers(p, r, size=(cam.height, cam.width), blur_sigma=s.blur_sigma,
                            noise_std=s.noise_std, rng=self._rng, intensity=s.intensity,

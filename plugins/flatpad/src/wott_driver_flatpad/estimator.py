@@ -14,11 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from wott_vision.markers import as_gray
 
 from .depth import DepthModel, MarkerPhotometry, ParallaxSolver, fill_lost
 from .geometry import PadLayout
 
-__all__ = ["PadEstimate", "PadEstimator", "ReferenceNotFound", "order_grid", "to_gray"]
+__all__ = ["PadEstimate", "PadEstimator", "ReferenceNotFound", "order_grid"]
 
 
 class ReferenceNotFound(ValueError):
@@ -31,18 +32,6 @@ class PadEstimate:
     lost: int  # markers the tracker lost in this frame (filled from neighbours)
     area_ratio: np.ndarray  # (N,) A / A_rest as measured, NaN where lost
     cue: np.ndarray  # (N,) x = Z / Z0 - 1, what the depth model maps to dz
-
-
-def to_gray(frame: np.ndarray) -> np.ndarray:
-    """A camera frame as the (H, W) uint8 image the detector takes."""
-    if frame.ndim == 3:
-        import cv2  # camera path only
-
-        code = cv2.COLOR_BGRA2GRAY if frame.shape[2] == 4 else cv2.COLOR_BGR2GRAY
-        frame = cv2.cvtColor(frame, code)
-    if frame.dtype != np.uint8:
-        frame = np.clip(frame, 0, 255).astype(np.uint8)
-    return np.ascontiguousarray(frame)
 
 
 def order_grid(points: np.ndarray, layout: PadLayout) -> np.ndarray:
@@ -118,7 +107,7 @@ class PadEstimator:
 
     def set_reference(self, frame: np.ndarray) -> None:
         """Take this image (pad at rest) as the reference all displacements are measured from."""
-        gray = to_gray(frame)
+        gray = as_gray(frame)
         px = order_grid(self.detect(gray), self.layout)
         self._photometry = MarkerPhotometry(gray, px, self.layout.window_half_px,
                                             2 * self.layout.marker_radius_px)
@@ -142,7 +131,7 @@ class PadEstimator:
         return np.asarray(self._tracker.track(self.detect(gray)), dtype=float)
 
     def update(self, frame: np.ndarray) -> PadEstimate:
-        gray = to_gray(frame)
+        gray = as_gray(frame)
         px = self.track(gray)
         return self.solve(gray, px)
 

@@ -87,8 +87,8 @@ SCHEMA: dict[str, Any] = {
 }
 
 
-def layout_from(settings: dict[str, Any]) -> PadLayout:
-    s = defaults(SCHEMA, settings)
+def layout_from(s: dict[str, Any]) -> PadLayout:
+    """The pad of settings ``s`` (defaults filled in)."""
     try:
         o = defaults(OPTICS_SCHEMA, s.get("optics"), "optics.")
         for key in ("principal_px", "centre_mm"):
@@ -101,8 +101,7 @@ def layout_from(settings: dict[str, Any]) -> PadLayout:
         raise DriverError(f"flat-vision settings: {e}") from None
 
 
-def describe(device_id: str, settings: dict[str, Any], layout: PadLayout) -> DeviceDescription:
-    s = defaults(SCHEMA, settings)
+def describe(device_id: str, s: dict[str, Any], layout: PadLayout) -> DeviceDescription:
     span_x = (layout.cols - 1) * layout.pitch_mm
     span_y = (layout.rows - 1) * layout.pitch_mm
     return DeviceDescription(
@@ -124,8 +123,8 @@ def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None
 
     s = defaults(SCHEMA, settings)
     check_material(s)
-    layout = layout_from(settings)
-    description = describe(device_id, settings, layout)
+    layout = layout_from(s)
+    description = describe(device_id, s, layout)
     render = section(RenderSettings, RENDER_SCHEMA, s.get("render"), "render")
     spec = str(s["depth_model"])
     estimator = PadEstimator(layout, None if spec == "calibrate" else _depth_model(spec, layout),

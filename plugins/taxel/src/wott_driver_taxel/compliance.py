@@ -55,6 +55,7 @@ class Compliance:
         return np.asarray(counts, dtype=np.float64) * self.mm_per_count
 
     def pressure_kpa(self, counts: np.ndarray) -> np.ndarray:
+        """Pressure (kPa) on each taxel from its counts."""
         return np.asarray(counts, dtype=np.float64) * self.kpa_per_count
 
     def counts(self, normal_mm: np.ndarray) -> np.ndarray:

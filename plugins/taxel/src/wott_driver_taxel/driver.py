@@ -73,13 +73,13 @@ class TaxelDriver(Driver):
             port, shape=self.shape, baudrate=self.baudrate, protocol=self.protocol, counters=self.counters,
             backoff=self._backoff, opener=self._opener, on_health=self.set_health,
         )
-        gain = self.compliance.mm_per_count
+        compliance = self.compliance
         try:
             async for t_ns, raw in reader.frames():
                 self.last_seq = raw.seq
                 counts = raw.values.astype(np.float64)
-                yield TactileFrame(t_ns, (counts * gain)[:, None] * self._inward,
-                                   pressure=counts * self.compliance.kpa_per_count)
+                yield TactileFrame(t_ns, compliance.normal_mm(counts)[:, None] * self._inward,
+                                   pressure=compliance.pressure_kpa(counts))
         finally:
             reader.stop()
 

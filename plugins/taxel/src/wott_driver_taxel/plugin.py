@@ -9,7 +9,8 @@ from __future__ import annotations
 from importlib import resources
 from typing import Any
 
-from wott_hub.plugins import DeviceConfig, FamilyInfo, hookimpl
+from wott_hub.plugins import DeviceConfig, FamilyInfo, hookimpl, naming_device
+from wott_hub.plugins.settings import BACKOFF_PROPERTIES
 from wott_hub.tactile.materials import MATERIALS
 
 FAMILY = "taxel-array"
@@ -45,10 +46,7 @@ SCHEMA: dict[str, Any] = {
                   "description": "Scene TOML the simulator plays; default the bundled demo scene."},
         "rate_hz": {"type": "number", "exclusiveMinimum": 0, "maximum": 2000, "default": 100.0,
                     "description": "Simulator frame rate, frames/s."},
-        "backoff_initial_s": {"type": "number", "exclusiveMinimum": 0, "default": 0.05,
-                              "description": "First reconnect delay, s."},
-        "backoff_cap_s": {"type": "number", "exclusiveMinimum": 0, "default": 5.0,
-                          "description": "Longest reconnect delay, s."},
+        **BACKOFF_PROPERTIES,
     },
     "additionalProperties": False,
     # A real board needs its port; a simulated one makes its own.
@@ -88,8 +86,8 @@ def open_taxel_device(config: DeviceConfig):
     import tomllib
     from dataclasses import replace
 
-    from wott_hub.drivers.backoff import Backoff
     from wott_hub.drivers.base import DriverError
+    from wott_hub.plugins.settings import backoff, with_defaults
     from wott_hub.sim.scene import Scene, SceneError
     from wott_hub.tactile import CoordinateFrame, DeviceDescription, SkinShape, flat_pad
 
@@ -98,15 +96,15 @@ def open_taxel_device(config: DeviceConfig):
     from .protocol import MAX_VALUES
     from .simulator import TaxelSimulator
 
-    s = {name: prop["default"] for name, prop in SCHEMA["properties"].items() if "default" in prop}
-    s.update(config.settings)
-    where = f"device {config.id!r} (family {FAMILY!r})"
+    s = with_defaults(SCHEMA, config.settings)
     rows, cols = int(s["rows"]), int(s["cols"])
-    if rows * cols > MAX_VALUES:
-        raise DriverError(f"{where}: setting 'rows': {rows} x {cols} taxels do not fit a frame "
-                          f"(max {MAX_VALUES} values)")
-    if s["backoff_cap_s"] < s["backoff_initial_s"]:
-        raise DriverError(f"{where}: setting 'backoff_cap_s': must not be below backoff_initial_s")
+    with naming_device(config):
+        if rows * cols > MAX_VALUES:
+            raise DriverError(f"setting 'rows': {rows} x {cols} taxels do not fit a frame "
+                              f"(max {MAX_VALUES} values)")
+        if s["backoff_cap_s"] < s["backoff_initial_s"]:
+            raise DriverError("setting 'backoff_cap_s': must not be below backoff_initial_s")
+        reconnect = backoff(s)
     pitch, thickness = float(s["pitch_mm"]), float(s["thickness_mm"])
     material = MATERIALS[s["material"]]
     mesh = flat_pad(rows, cols, pitch_mm=pitch, clamp_border=False, name=f"taxel-{rows}x{cols}")
@@ -121,19 +119,19 @@ def open_taxel_device(config: DeviceConfig):
     compliance = Compliance(material.modulus_mpa * 1000.0, thickness, float(s["kpa_per_count"]))
     simulator = None
     if s["simulate"]:
-        try:
-            if "scene" in s:
-                scene = Scene.load(s["scene"])
-            else:
-                scene = Scene.from_dict(tomllib.loads(demo_scene_text()),
-                                        source=f"wott_driver_taxel/scenes/{DEMO_SCENE}")
-        except SceneError as e:
-            raise DriverError(f"{where}: setting 'scene': {e}") from None
+        with naming_device(config):
+            try:
+                if "scene" in s:
+                    scene = Scene.load(s["scene"])
+                else:
+                    scene = Scene.from_dict(tomllib.loads(demo_scene_text()),
+                                            source=f"wott_driver_taxel/scenes/{DEMO_SCENE}")
+            except SceneError as e:
+                raise DriverError(f"setting 'scene': {e}") from None
         simulator = TaxelSimulator(scene, mesh, (rows, cols), compliance, rate_hz=float(s["rate_hz"]),
                                    protocol=s["protocol"])
         desc = replace(desc, description=desc.description + " (simulated)")
     return TaxelDriver(
         desc, shape=(rows, cols), compliance=compliance, port=s.get("port"), baudrate=int(s["baudrate"]),
-        protocol=s["protocol"], simulator=simulator,
-        backoff=Backoff(initial_s=float(s["backoff_initial_s"]), cap_s=float(s["backoff_cap_s"])),
+        protocol=s["protocol"], simulator=simulator, backoff=reconnect,
     )

@@ -66,12 +66,6 @@ class CameraReader:
         self.frames_read += 1
         return True, frame
 
-    def get(self, prop: int) -> float:
-        return float(self._cap.get(prop))
-
-    def set(self, prop: int, value: float) -> bool:
-        return bool(self._cap.set(prop, value))
-
     def isOpened(self) -> bool:  # noqa: N802 - VideoCapture's name
         return bool(self._cap.isOpened())
 
@@ -88,12 +82,8 @@ class CameraReader:
         return f"CameraReader({self.spec!r}, frames_read={self.frames_read})"
 
 
-def open_source(spec: int | str, *, width: int | None = None, height: int | None = None,
-                fps: float | None = None) -> CameraReader:
-    """Open a device index, a video/image-sequence file or a stream URL, or raise ``CameraError``.
-
-    ``width``/``height``/``fps`` are requested from devices (drivers may ignore them).
-    """
+def open_source(spec: int | str) -> CameraReader:
+    """Open a device index, a video/image-sequence file or a stream URL, or raise ``CameraError``."""
     import cv2
 
     src = parse_spec(spec)
@@ -104,9 +94,4 @@ def open_source(spec: int | str, *, width: int | None = None, height: int | None
         cap.release()
         kind = "camera device" if isinstance(src, int) else "video source"
         raise CameraError(f"cannot open {kind} {src!r} (missing, busy or unsupported format)")
-    if isinstance(src, int):
-        for prop, value in ((cv2.CAP_PROP_FRAME_WIDTH, width), (cv2.CAP_PROP_FRAME_HEIGHT, height),
-                            (cv2.CAP_PROP_FPS, fps)):
-            if value:
-                cap.set(prop, float(value))
     return CameraReader(cap, src)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MarkerDetector", "auto_threshold", "detect_markers"]
+__all__ = ["MarkerDetector", "as_gray", "auto_threshold", "detect_markers"]
 
 MIN_CONTRAST = 20  # grey levels above the median skin a marker must reach
 CENTROIDS = ("weighted", "binary")
@@ -61,13 +61,21 @@ def _percentile(hist: np.ndarray, q: float, start: int = 0) -> float:
     return float(start + np.searchsorted(np.cumsum(h), q * total))
 
 
-def auto_threshold(gray: np.ndarray, mask: np.ndarray | None = None) -> int:
-    """Otsu's level, but at least ``MIN_CONTRAST`` above the median grey (the skin)."""
-    hist = _histogram(gray, mask)
+def _level(hist: np.ndarray) -> int:
     return int(max(_otsu(hist), _percentile(hist, 0.5) + MIN_CONTRAST))
 
 
-def _as_gray(gray: np.ndarray) -> np.ndarray:
+def auto_threshold(gray: np.ndarray, mask: np.ndarray | None = None) -> int:
+    """Otsu's level, but at least ``MIN_CONTRAST`` above the median grey (the skin)."""
+    return _level(_histogram(gray, mask))
+
+
+def as_gray(gray: np.ndarray) -> np.ndarray:
+    """A frame as the contiguous (H, W) uint8 image the detector takes.
+
+    BGR / BGRA (OpenCV's camera frames) become grey; other dtypes are clipped to 0..255
+    (floats all within 0..1 are scaled by 255 first); anything else is a ValueError.
+    """
     g = np.asarray(gray)
     if g.ndim == 3 and g.shape[2] in (3, 4):
         import cv2
@@ -126,7 +134,7 @@ class MarkerDetector:
             self._mask_roi = np.ascontiguousarray((m[y0:y1, x0:x1] != 0).astype(np.uint8) * 255)
 
     def __call__(self, gray: np.ndarray) -> np.ndarray:
-        g = _as_gray(gray)
+        g = as_gray(gray)
         x0 = y0 = 0
         mask = None
         if self._roi is not None:
@@ -186,7 +194,7 @@ def _detect(g: np.ndarray, mask: np.ndarray | None, threshold: int | None, min_a
     hist = None
     if threshold is None:
         hist = _histogram(g, mask)
-        t = int(max(_otsu(hist), _percentile(hist, 0.5) + MIN_CONTRAST))
+        t = _level(hist)
     else:
         t = int(threshold)
     _, fg = cv2.threshold(g, t, 1, cv2.THRESH_BINARY)

@@ -3,12 +3,16 @@
 Both take a simulator (scene, frame rate, pacing) or real cameras, reconnect
 with the same backoff settings and render simulated markers through
 ``wott_vision.render``; a family's schema splices these in among its own
-properties. Reading the settings: ``wott_vision.settings``.
+properties (``BACKOFF_PROPERTIES`` is not camera-specific: it lives in
+``wott_hub.plugins.settings`` and is re-exported here). Reading the settings:
+``wott_vision.settings``.
 """
 
 from __future__ import annotations
 
 from typing import Any
+
+from wott_hub.plugins.settings import BACKOFF_PROPERTIES
 
 __all__ = ["BACKOFF_PROPERTIES", "RENDER_PROPERTIES", "number", "simulator_properties", "table"]
 
@@ -36,11 +40,6 @@ def simulator_properties(fps: float, **fps_limits: Any) -> dict[str, Any]:
                      "description": "Simulator paces frames like a camera (false: as fast as read)."},
     }
 
-
-BACKOFF_PROPERTIES: dict[str, Any] = {
-    "backoff_initial_s": number(0.05, "First reconnect delay, s.", exclusiveMinimum=0),
-    "backoff_cap_s": number(5.0, "Longest reconnect delay, s.", exclusiveMinimum=0),
-}
 
 RENDER_PROPERTIES: dict[str, Any] = {  # the simulator's image chain (wott_vision.render)
     "blur_sigma": number(1.0, "Gaussian lens blur, px.", minimum=0),

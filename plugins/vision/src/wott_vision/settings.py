@@ -2,8 +2,10 @@
 
 The barrel skin and the flat pad both take a simulator or real cameras, pace
 reconnects the same way and nest sub-tables (``render``, ...) with their own
-defaults; reading those is the same code for both. Errors are ``DriverError``s
-naming the setting at fault (the plugin hook adds the device and family).
+defaults; reading those is the same code for both. ``defaults`` and ``backoff``
+are not camera-specific: they live in ``wott_hub.plugins.settings`` and are
+re-exported here. Errors are ``DriverError``s naming the setting at fault (the
+plugin hook adds the device and family).
 Nothing here imports cv2: the reader a family makes is opened by its driver.
 """
 
@@ -13,8 +15,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from wott_hub.drivers.backoff import Backoff
 from wott_hub.drivers.base import DriverError
+from wott_hub.plugins.settings import backoff, defaults
 from wott_hub.sim.scene import Scene, SceneError
 from wott_hub.tactile import MATERIALS
 
@@ -22,21 +24,6 @@ from .driver import FrameReader
 from .simulated import SimulatedSource, Simulator
 
 __all__ = ["backoff", "check_material", "defaults", "section", "simulator_source"]
-
-
-def defaults(schema: dict[str, Any], given: dict[str, Any] | None, where: str = "") -> dict[str, Any]:
-    """``given`` completed with the schema's defaults; an unknown key is an error naming it.
-
-    The registry checks the top level against the schema before a plugin sees it, but a family
-    can be opened directly (tests, scripts), and nested tables get their defaults only here.
-    """
-    given = dict(given or {})
-    unknown = sorted(set(given) - set(schema["properties"]))
-    if unknown:
-        raise DriverError(f"unknown setting(s) {', '.join(where + u for u in unknown)}")
-    out = {k: v["default"] for k, v in schema["properties"].items() if "default" in v}
-    out.update(given)
-    return out
 
 
 def section(factory: Callable[..., Any], schema: dict[str, Any], given: dict[str, Any] | None, key: str):
@@ -51,13 +38,6 @@ def section(factory: Callable[..., Any], schema: dict[str, Any], given: dict[str
 def check_material(s: dict[str, Any]) -> None:
     if s["material"] not in MATERIALS:
         raise DriverError(f"material: {s['material']!r} is not one of {', '.join(sorted(MATERIALS))}")
-
-
-def backoff(s: dict[str, Any]) -> Backoff:
-    try:
-        return Backoff(initial_s=float(s["backoff_initial_s"]), cap_s=float(s["backoff_cap_s"]))
-    except ValueError as e:
-        raise DriverError(f"backoff_initial_s/backoff_cap_s: {e}") from None
 
 
 def simulator_source(

@@ -79,10 +79,6 @@ class MarkerTracker:
         self.gate = np.clip(gate_fraction * spacing, min_gate_px, max_gate_px)
         self.reset()
 
-    @property
-    def n_markers(self) -> int:
-        return len(self.reference)
-
     def reset(self) -> None:
         """Forget the motion: every marker is searched for at its reference position again."""
         self.last = self.reference.copy()  # last seen (or, when lost, best guessed) position
