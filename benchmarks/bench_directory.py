@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote, urlencode
 
-from report import markdown_table, write_section
+from report import markdown_table, pct, write_section
 from tornado.httpclient import AsyncHTTPClient, HTTPRequest
 from wott_directory import DirectoryClient
 from wott_directory.registration import enrich
@@ -45,11 +45,6 @@ QUERIES = [
     ("all ids", "$[*].id"),
     ("nested test (all match)", "$[?@.properties.skinNodes.observable==true].id"),
 ]
-
-
-def pct(values: list[float], q: float) -> float:
-    values = sorted(values)
-    return values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))]
 
 
 def ms(x: float) -> str:

@@ -30,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from report import pct
+
 now_ns = time.perf_counter_ns
 
 
@@ -227,13 +229,6 @@ class Client:
 # ======================================================================================
 # shared helpers
 # ======================================================================================
-
-def pct(values, q: float) -> float:
-    if not values:
-        return float("nan")
-    s = sorted(values)
-    return s[min(len(s) - 1, int(round(q / 100 * (len(s) - 1))))]
-
 
 def ms(ns: float) -> str:
     return "-" if ns != ns else f"{ns / 1e6:.2f}"

@@ -23,7 +23,7 @@ def device(request):
 def test_shipped_td_schema_is_the_reference(shared_data):
     from importlib import resources
 
-    shipped = resources.files("wott_hub.td").joinpath("data/td-1.1-json-schema.json").read_text()
+    shipped = resources.files("wott_directory").joinpath("data/td-1.1-json-schema.json").read_text()
     assert json.loads(shipped) == json.loads((shared_data / "w3c/td-1.1-json-schema.json").read_text())
 
 

@@ -10,15 +10,24 @@ or run it alone with ``wott-directory`` (see ``wott_directory.cli``). Producers
 register and refresh their TDs with ``Registrar``; clients use ``DirectoryClient``.
 """
 
-from .client import DirectoryClient, ProblemError, Registrar, SSEEvent
-from .directory import Directory
-from .errors import DirectoryError
-from .handlers import directory_handlers, make_app
-from .models import create_schema
-from .server import DirectoryServer
-from .settings import ConfigError, DirectorySettings
+from importlib import import_module
+from typing import Any
 
-__all__ = [
-    "ConfigError", "Directory", "DirectoryClient", "DirectoryError", "DirectoryServer", "DirectorySettings",
-    "ProblemError", "Registrar", "SSEEvent", "create_schema", "directory_handlers", "make_app",
-]
+# The public names, loaded on first use: ``wott_directory.validation`` (the W3C TD schema,
+# used by ``wott-hub td validate``) must not pull in tornado and SQLAlchemy with the package.
+_EXPORTS = {
+    "DirectoryClient": ".client", "ProblemError": ".client", "Registrar": ".client", "SSEEvent": ".client",
+    "Directory": ".directory", "DirectoryError": ".errors", "directory_handlers": ".handlers",
+    "make_app": ".handlers", "create_schema": ".models", "DirectoryServer": ".server",
+    "ConfigError": ".settings", "DirectorySettings": ".settings",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(_EXPORTS[name], __name__), name)
+    globals()[name] = value
+    return value

@@ -57,6 +57,8 @@ def settings_from_args(args: argparse.Namespace) -> DirectorySettings:
 
 async def _serve(args: argparse.Namespace) -> None:
     settings = settings_from_args(args)
+    # DirectoryServer.start checks this too, but only after Directory() has built the engine,
+    # which fails first on a --db whose driver is missing: refuse the unsafe binding before that
     settings.check_bind(args.host)
     server = DirectoryServer(Directory(settings, args.db), args.host, args.port, args.public_url)
     await server.start()

@@ -315,9 +315,8 @@ class Registrar:
         self._task: asyncio.Task[None] | None = None
 
     def _with_ttl(self, td: dict[str, Any]) -> dict[str, Any]:
-        reg = {k: v for k, v in (td.get("registration") or {}).items() if k == "ttl"}
-        reg["ttl"] = self.ttl
-        return {**{k: v for k, v in td.items() if k != "registration"}, "registration": reg}
+        """The TD with its ``registration`` replaced by ``{"ttl": ttl}`` (moved last)."""
+        return {**{k: v for k, v in td.items() if k != "registration"}, "registration": {"ttl": self.ttl}}
 
     async def register(self, td: dict[str, Any]) -> bool:
         """Register (or replace) a TD; True if the directory accepted it now."""

@@ -32,7 +32,7 @@ from .registration import Enriched, enrich, iso, same_content
 from .search import SearchEngine
 from .selftd import directory_td
 from .settings import DirectorySettings
-from .store import StoredEvent, ThingStore
+from .store import ThingStore
 from .validation import check_td
 
 __all__ = ["Directory"]
@@ -82,7 +82,7 @@ class Directory:
                 self._expiry.append((rec.expires.timestamp(), t.id))
         self._ids = sorted(self._things)
         heapq.heapify(self._expiry)
-        self.events.restore(Event(e.id, e.type, e.thing_id, e.data) for e in events)
+        self.events.restore(events)
         self._trimmed_to = max(0, self.events.last_id - self.settings.event_retention)
         self._writes_since_freeze = 0
         if self.settings.freeze_gc:
@@ -243,7 +243,7 @@ class Directory:
         row = {"id": thing_id, "td": rec.td, "anonymous": anonymous, "own": thing_id in self._own,
                "created": rec.created,
                "modified": rec.modified, "expires": rec.expires}
-        await self.store.write(upserts=[row], events=[_stored(event)] if event else [],
+        await self.store.write(upserts=[row], events=[event] if event else [],
                                new_ids=[] if prev else [thing_id])
         self._things[thing_id] = rec
         if prev is None:
@@ -259,7 +259,7 @@ class Directory:
 
     async def _delete_locked(self, thing_id: str, reason: str = "deleted") -> None:
         event = Event(self.events.next_id(), "thing_deleted", thing_id, None)
-        await self.store.write(deletes=[thing_id], events=[_stored(event)])
+        await self.store.write(deletes=[thing_id], events=[event])
         del self._things[thing_id]
         self._anonymous.discard(thing_id)
         i = bisect.bisect_left(self._ids, thing_id)
@@ -315,8 +315,4 @@ def _served(td: dict[str, Any], retrieved: str) -> dict[str, Any]:
     out = dict(td)
     out["registration"] = {**td.get("registration", {}), "retrieved": retrieved}
     return out
-
-
-def _stored(event: Event) -> StoredEvent:
-    return StoredEvent(event.id, event.type, event.thing_id, event.data)
 

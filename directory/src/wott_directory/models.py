@@ -2,8 +2,10 @@
 
 Table names start with ``tdd_`` so they can live in the hub's database. The TD
 is stored as JSON text in the enriched form the directory serves (with its
-``registration`` block); the timestamp columns repeat what the TD says so SQL
-alone can find expired rows.
+``registration`` block); the timestamp columns repeat what the TD says, for
+queries and inspection outside the directory. The directory itself never asks
+SQL for expired rows: it rebuilds the expiry times from the stored TDs at start
+and purges from an in-memory heap (``Directory.purge``).
 """
 
 from __future__ import annotations

@@ -80,8 +80,7 @@ def enrich(td: dict[str, Any], now: datetime, previous: Enriched | None) -> Enri
         reg["expires"] = iso(expires)
     if ttl is not None:
         reg["ttl"] = ttl
-    out = with_context({k: v for k, v in td.items() if k != "registration"})
-    out = dict(out)
+    out = with_context({k: v for k, v in td.items() if k != "registration"})  # a new dict either way
     out["registration"] = reg
     return Enriched(out, created, now, expires)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import ipaddress
 import uuid
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 __all__ = ["ConfigError", "DirectorySettings", "is_loopback"]
 
@@ -61,7 +61,6 @@ class DirectorySettings:
     in memory, and stalls the IOLoop; TDs are acyclic JSON trees, freed by reference counting
     anyway. Process-wide, so off by default in a library; the standalone command turns it on."""
     freeze_every: int = 1000
-    extra: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.base_url.endswith("/"):
@@ -78,10 +77,6 @@ class DirectorySettings:
     @property
     def own_id(self) -> str:
         return self.thing_id or f"urn:uuid:{uuid.uuid5(uuid.NAMESPACE_URL, self.base_url)}"
-
-    @property
-    def writes_need_token(self) -> bool:
-        return not self.open_writes
 
     def check_bind(self, host: str) -> None:
         """Refuse open writes on an address other machines can reach."""

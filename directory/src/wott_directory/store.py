@@ -19,9 +19,10 @@ from sqlalchemy import create_engine, delete, event, inspect, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.pool import StaticPool
 
+from .events import Event
 from .models import EventRow, ThingRow, create_schema
 
-__all__ = ["StoredEvent", "StoredThing", "ThingStore", "make_engine"]
+__all__ = ["StoredThing", "ThingStore", "make_engine"]
 
 T = TypeVar("T")
 
@@ -53,15 +54,7 @@ class StoredThing:
     own: bool = False
 
 
-@dataclass(frozen=True)
-class StoredEvent:
-    id: int
-    type: str
-    thing_id: str
-    data: dict[str, Any] | None
-
-
-def _naive_utc(moment: datetime | None) -> datetime | None:
+def _utc(moment: datetime | None) -> datetime | None:
     return None if moment is None else moment.astimezone(UTC)
 
 
@@ -79,10 +72,10 @@ class ThingStore:
         return await asyncio.get_running_loop().run_in_executor(self._executor, fn, *args)
 
     # -- start-up --------------------------------------------------------------
-    async def open(self, event_retention: int) -> tuple[list[StoredThing], list[StoredEvent]]:
+    async def open(self, event_retention: int) -> tuple[list[StoredThing], list[Event]]:
         return await self._run(self._open, event_retention)
 
-    def _open(self, event_retention: int) -> tuple[list[StoredThing], list[StoredEvent]]:
+    def _open(self, event_retention: int) -> tuple[list[StoredThing], list[Event]]:
         if self.create_tables:
             create_schema(self.engine)
         else:
@@ -95,17 +88,17 @@ class ThingStore:
             things = [StoredThing(r.id, json.loads(r.td), r.anonymous, r.own) for r in conn.execute(
                 select(ThingRow.id, ThingRow.td, ThingRow.anonymous, ThingRow.own))]
             rows = conn.execute(select(EventRow).order_by(EventRow.id.desc()).limit(event_retention)).all()
-        events = [StoredEvent(r.id, r.type, r.thing_id, json.loads(r.data) if r.data else None)
+        events = [Event(r.id, r.type, r.thing_id, json.loads(r.data) if r.data else None)
                   for r in reversed(rows)]
         return things, events
 
     # -- writes ----------------------------------------------------------------
     async def write(self, upserts: Iterable[dict[str, Any]] = (), deletes: Iterable[str] = (),
-                    events: Iterable[StoredEvent] = (), new_ids: Iterable[str] = ()) -> None:
+                    events: Iterable[Event] = (), new_ids: Iterable[str] = ()) -> None:
         """One transaction: rows to insert (ids in ``new_ids``) or update, ids to delete, events."""
         await self._run(self._write, list(upserts), list(deletes), list(events), set(new_ids))
 
-    def _write(self, upserts: list[dict[str, Any]], deletes: list[str], events: list[StoredEvent],
+    def _write(self, upserts: list[dict[str, Any]], deletes: list[str], events: list[Event],
                new_ids: set[str]) -> None:
         with self.engine.begin() as conn:
             inserts = [u for u in upserts if u["id"] in new_ids]
@@ -127,8 +120,8 @@ class ThingStore:
     def _row(u: dict[str, Any]) -> dict[str, Any]:
         return {"id": u["id"], "td": json.dumps(u["td"], ensure_ascii=False),
                 "anonymous": u.get("anonymous", False), "own": u.get("own", False),
-                "created": _naive_utc(u["created"]),
-                "modified": _naive_utc(u["modified"]), "expires": _naive_utc(u.get("expires"))}
+                "created": _utc(u["created"]),
+                "modified": _utc(u["modified"]), "expires": _utc(u.get("expires"))}
 
     async def trim_events(self, keep_after: int) -> None:
         await self._run(self._trim, keep_after)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Callable
 from datetime import datetime
 from functools import cache
 from importlib import resources
@@ -28,7 +29,7 @@ from jsonschema.exceptions import ValidationError, best_match
 
 from .errors import BadRequest, ValidationFailed
 
-__all__ = ["check_td", "load_data", "parse_json_body", "parse_rfc3339", "td_problems"]
+__all__ = ["check_td", "load_data", "parse_json_body", "parse_rfc3339", "schema_problems", "td_problems"]
 
 _URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:\S*$")
 _RFC3339 = re.compile(
@@ -69,22 +70,31 @@ def parse_rfc3339(text: str) -> datetime | None:
         return None
 
 
-def _schema_problems(validator: jsonschema.protocols.Validator, doc: Any) -> list[dict[str, str]]:
-    out: list[dict[str, str]] = []
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key) else f"{path}[{json.dumps(key)}]"
+
+
+def schema_problems(validator: jsonschema.protocols.Validator, doc: Any, *,
+                    join: Callable[[str, str], str] = _join) -> list[tuple[str, str]]:
+    """``(JSON path, description)`` of each schema error in ``doc``, in path order, without repeats.
+
+    A missing required member is named by ``join(path of its object, its key)``, by
+    default ``$.a.b`` or ``$.a["@b"]`` when the key is not an identifier.
+    """
+    out: list[tuple[str, str]] = []
     for err in sorted(validator.iter_errors(doc), key=lambda e: [str(p) for p in e.absolute_path]):
         if err.context:  # anyOf/oneOf: report the branch that came closest
             err = best_match(err.context)
         if err.validator == "required" and isinstance(err.instance, dict):
-            out += [{"field": _join(err.json_path, k), "description": "required field is missing"}
+            out += [(join(err.json_path, k), "required field is missing")
                     for k in err.validator_value if k not in err.instance]
         else:
-            out.append({"field": err.json_path, "description": _message(err)})
-    unique = {(p["field"], p["description"]): p for p in out}  # the TD schema's anyOf repeats itself
-    return list(unique.values())
+            out.append((err.json_path, _message(err)))
+    return list(dict.fromkeys(out))  # the TD schema's anyOf branches repeat some errors
 
 
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key) else f"{path}[{json.dumps(key)}]"
+def _schema_problems(validator: jsonschema.protocols.Validator, doc: Any) -> list[dict[str, str]]:
+    return [{"field": field, "description": text} for field, text in schema_problems(validator, doc)]
 
 
 def _message(err: ValidationError) -> str:

@@ -6,14 +6,12 @@ Every problem names the failing field by its JSON path, so a user can find it.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from functools import cache
-from importlib import resources
 from typing import Any
 
 import jsonschema
-from jsonschema.exceptions import ValidationError, best_match
+from wott_directory.validation import load_data, schema_problems
 
 from .vocabulary import EVENTS, PROPERTIES, TD_CONTEXT
 
@@ -36,8 +34,7 @@ class Problem:
 
 @cache
 def td_schema_validator() -> jsonschema.protocols.Validator:
-    text = resources.files("wott_hub.td").joinpath("data/td-1.1-json-schema.json").read_text()
-    schema = json.loads(text)
+    schema = load_data("td-1.1-json-schema.json")  # the W3C schema shipped with wott_directory
     return jsonschema.Draft7Validator(schema, format_checker=jsonschema.Draft7Validator.FORMAT_CHECKER)
 
 
@@ -94,26 +91,14 @@ def tactile_validator() -> jsonschema.protocols.Validator:
 
 
 def _problems(validator: jsonschema.protocols.Validator, doc: Any, rule: str) -> list[Problem]:
-    out = []
-    errors = sorted(validator.iter_errors(doc), key=lambda e: list(map(str, e.absolute_path)))
-    for err in errors:
-        if err.context:  # oneOf/anyOf: report the branch that came closest
-            err = best_match(err.context)
-        if err.validator == "required" and isinstance(err.instance, dict):
-            out += [Problem(rule, f"{err.json_path}.{k}", "required field is missing")
-                    for k in err.validator_value if k not in err.instance]
-        else:
-            out.append(Problem(rule, err.json_path, _message(err)))
-    return list(dict.fromkeys(out))  # the TD schema's anyOf branches repeat some errors
+    return [Problem(rule, path, message)
+            for path, message in schema_problems(validator, doc, join=_dotted)]
 
 
-def _message(err: ValidationError) -> str:
-    """jsonschema's message, without pasting a whole sub-document into it."""
-    text = repr(err.instance)
-    if len(text) <= 80:
-        return err.message
-    short = text[:60] + "…"
-    return err.message.replace(text, short) if text in err.message else f"{err.validator} failed"
+def _dotted(path: str, key: str) -> str:
+    """A missing member's path as ``td validate`` has always printed it: ``$.a.@context``, where
+    the directory's problem+json writes ``$.a["@context"]``."""
+    return f"{path}.{key}"
 
 
 def _interop_problems(td: dict[str, Any]) -> list[Problem]:
