@@ -112,6 +112,17 @@ def test_broken_td_gives_readable_errors_naming_the_field():
         assert len(str(p)) < 300  # readable: no whole sub-documents pasted into messages
 
 
+@pytest.mark.parametrize(("where", "value"), [
+    ("properties", [1, 2]), ("properties", {"skinNodes": "a string"}),
+    ("events", {"skinDeformedDetection": {"forms": 7}}), ("actions", {"a": {"forms": ["href", 3]}}),
+])
+def test_malformed_affordances_are_reported_not_crashed_on(where, value):
+    td = build_tactile_td(example_device("flat"))
+    td[where] = value
+    problems = validate_td(td)
+    assert any(p.rule == "td-1.1" and p.path.startswith(f"$.{where}") for p in problems)
+
+
 def test_context_defines_every_vocabulary_term():
     ctx = tactile_context()["@context"]
     assert ctx["tac"].startswith("https://")

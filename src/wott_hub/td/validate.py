@@ -109,10 +109,16 @@ def _interop_problems(td: dict[str, Any]) -> list[Problem]:
         out.append(Problem("interop", "$['@context']",
                            f"must be an array starting with {TD_CONTEXT} (node-wot needs v1 first)"))
     for kind in ("properties", "actions", "events"):
-        for name, aff in (td.get(kind) or {}).items():
+        affordances = td.get(kind)
+        if not isinstance(affordances, dict):  # a wrong type is the TD schema's problem, reported there
+            continue
+        for name, aff in affordances.items():
             base = f"$.{kind}.{name}"
             _find_empty_keywords(aff, base, out)
-            for i, form in enumerate(aff.get("forms") or []):
+            forms = aff.get("forms") if isinstance(aff, dict) else None
+            for i, form in enumerate(forms if isinstance(forms, list) else []):
+                if not isinstance(form, dict):
+                    continue
                 where = f"{base}.forms[{i}]"
                 if "op" not in form:
                     out.append(Problem("interop", f"{where}.op", "every form must state its op"))
