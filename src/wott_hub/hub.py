@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import inspect
-import json
 import logging
 import signal
 import time
@@ -35,7 +33,7 @@ from wott_hub.drivers.base import Driver, DriverError
 from wott_hub.events.plane import EventPlane
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, encode
 from wott_hub.network import HubNetwork
-from wott_hub.pump import pump
+from wott_hub.pump import CONTACTS, frame_records, health_state, pump, skin_deformed_json
 from wott_hub.servient import HUB_THING_ID, HubServer, ServedThing, clean_td, hub_td, with_forms
 from wott_hub.tactile import FrameProcessor, FrameResult, ProcessingParams
 from wott_hub.td.builder import build_tactile_td, static_property_values
@@ -44,9 +42,6 @@ __all__ = ["DeviceRuntime", "Hub", "ReplayRuntime", "demo_devices", "serve", "sk
 
 log = logging.getLogger(__name__)
 
-SKIN_DEFORMED = "skinDeformedDetection"
-ACTION = "actionDetection"
-CONTACTS = "contactInformation"
 _NO_CONTACTS = encode({"numOfContacts": 0, "contactLocations": [], "contactForces": []})
 
 
@@ -76,10 +71,7 @@ class DeviceRuntime:
         return self._contacts_json
 
     def health_state(self) -> tuple[str, str]:
-        if self.state in ("ended", "failed", "starting"):
-            return self.state, self.reason
-        h = self.driver.health()
-        return h.state.value, h.reason
+        return health_state(self)
 
 
 @dataclass(eq=False)
@@ -93,18 +85,6 @@ class ReplayRuntime:
     state: str = "running"
 
 
-def skin_deformed_json(res: FrameResult) -> str:
-    """``encode(res.skin_deformed_detection())``, written straight from the arrays.
-
-    The same JSON text (Python's float repr is what ``json`` writes), without
-    building a dict per deformed node first: 3-4x faster for a large contact.
-    """
-    nodes = ",".join([f'{{"deformedNodeID":{i},"deformedNodeIntensity":{v!r}}}'
-                      for i, v in zip(res.deformed_nodes.tolist(), res.intensity.tolist(), strict=True)])
-    return (f'{{"timeStamp":{res.t_ns},"numOfDeformedNodes":{len(res.deformed_nodes)},'
-            f'"arrayOfDeformedNodes":[{nodes}]}}')
-
-
 def processing_params(desc) -> ProcessingParams:
     """Processing settings from what the device says about itself."""
     return ProcessingParams(epsilon_mm=desc.epsilon_mm, modulus_mpa=desc.material.modulus_mpa,
@@ -112,8 +92,7 @@ def processing_params(desc) -> ProcessingParams:
 
 
 class Hub:
-    def __init__(self, config: HubConfig | None = None, *, extra_handlers: Sequence[tuple] = (),
-                 open_device: Callable[[Any], Driver] | None = None) -> None:
+    def __init__(self, config: HubConfig | None = None, *, extra_handlers: Sequence[tuple] = ()) -> None:
         self.config = cfg = config or HubConfig()
         self.plane = EventPlane(ring_size=cfg.ring_size, max_pending=cfg.max_pending)
         self.server = HubServer(self.plane, host=cfg.host, http_port=cfg.http_port, ws_port=cfg.ws_port,
@@ -127,12 +106,9 @@ class Hub:
         self.reader = None
         self.state = "stopped"
         self.started_at = 0.0
-        self._open_device = open_device
-        self._health_memo: dict[str, tuple[str, str]] = {}
         self._health_task: asyncio.Task | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._failed_devices: dict[str, str] = {}
-        self.serving_s = 0.0  # seconds from start() to TDs served
         self.pool = None  # WorkerPool when [hub] workers > 0
         self.network = HubNetwork(self)  # TD directory, registrations, mDNS (src/wott_hub/network/)
 
@@ -158,7 +134,6 @@ class Hub:
                 log.error("device %s not started: %s", dcfg.id, e)
                 self._failed_devices[dcfg.id] = str(e)
         await self.server.start(streams_ready=False)
-        self.serving_s = time.monotonic() - self.started_at
         if cfg.history:
             await asyncio.to_thread(self._open_history)
         for dev in list(self.devices.values()):
@@ -250,14 +225,9 @@ class Hub:
             driver = RemoteDriver(desc, self.pool, worker)
             return await self.add_driver(driver, device_id=dcfg.id, family=dcfg.family,
                                          record=dcfg.id not in self.config.history_skip, run=run)
-        opener = self._open_device
-        if opener is None:
-            from wott_hub.plugins import get_registry
+        from wott_hub.plugins import get_registry
 
-            opener = get_registry().open_device
-        driver = opener(dcfg)
-        if inspect.isawaitable(driver):
-            driver = await driver
+        driver = get_registry().open_device(dcfg)
         await driver.prepare()  # e.g. a network device's mesh, read before its TD can be built
         return await self.add_driver(driver, device_id=dcfg.id, family=dcfg.family,
                                      record=dcfg.id not in self.config.history_skip, run=run)
@@ -278,17 +248,12 @@ class Hub:
         static = static_property_values(desc)
         static.pop(CONTACTS, None)
         record = record and self.config.history
-        self.plane.add_stream(tid, record=record)
         served = ServedThing.create(tid, td, static, record=record)
         remote = self.pool is not None and getattr(driver, "pool", None) is self.pool
         processor = None if remote else FrameProcessor(desc.mesh, processing_params(desc))
         dev = DeviceRuntime(tid, family or desc.family, driver, processor, served, record)
         served.dynamic[CONTACTS] = dev.read_contacts
-        try:
-            self.server.expose(served)
-        except ValueError as e:
-            self.plane.remove_stream(tid)
-            raise DriverError(str(e)) from None
+        self._serve(served)
         self.devices[tid] = dev
         if run:
             await self._attach_history(dev)
@@ -301,11 +266,28 @@ class Hub:
         if not dev.record or self.writer is None:
             st.record = dev.record = dev.thing.record = False
             return
-        static = {k: json.loads(v) for k, v in dev.thing.static.items()}
-        start_after = await asyncio.to_thread(
-            self.writer.register_thing, dev.id, title=dev.thing.title, family=dev.family,
-            td=json.dumps(dev.thing.td), static_values=json.dumps(static))
-        st.seq = st.committed = start_after
+        st.seq = st.committed = await self._register(dev.thing, dev.family)
+
+    async def _register(self, served: ServedThing, family: str) -> int:
+        """Record the Thing's TD and static values (the texts already encoded for serving); returns
+        the last seq it may have used."""
+        return await asyncio.to_thread(
+            self.writer.register_thing, served.id, title=served.title, family=family,
+            td=served.td_bytes().decode(), static_values=served.static_json())
+
+    def _serve(self, served: ServedThing, start_after: int | None = None) -> None:
+        """Put a Thing on the event plane and on every binding; nothing is left behind if it
+        cannot be served (e.g. its id collides with another's in WebSocket URLs)."""
+        self.plane.add_stream(served.id, record=served.record, start_after=start_after)
+        try:
+            self.server.expose(served)
+        except ValueError as e:
+            self.plane.remove_stream(served.id)
+            raise DriverError(str(e)) from None
+
+    def _unserve(self, thing_id: str) -> None:
+        self.server.remove(thing_id)
+        self.plane.remove_stream(thing_id)
 
     def _run(self, dev: DeviceRuntime) -> None:
         if dev.processor is None:  # a worker process runs it
@@ -359,34 +341,16 @@ class Hub:
             await dev.driver.close()
         if dev.task is not None:
             await asyncio.gather(dev.task, return_exceptions=True)
-        self.server.remove(device_id)
-        self.plane.remove_stream(device_id)
+        self._unserve(device_id)
 
     async def _pump(self, dev: DeviceRuntime) -> None:
         """Frames in, records out; a driver that raises is restarted with backoff."""
-        await pump(dev, dev.id, lambda res, t_in: self._publish(dev, res, t_in), trace=self.plane.trace)
+        tid, wants, publish = dev.id, self.plane.wants, self.plane.publish
 
-    def _publish(self, dev: DeviceRuntime, res: FrameResult, t_in: int) -> None:
-        plane, tid = self.plane, dev.id
-        trace = None
-        if t_in:
-            trace = {"in": t_in, "proc": time.perf_counter_ns()}
-        if res.packet_due and plane.wants(tid, KIND_EVENT, SKIN_DEFORMED):
-            data = skin_deformed_json(res)
-            if trace is not None:
-                trace["enc"] = time.perf_counter_ns()
-            plane.publish(tid, KIND_EVENT, SKIN_DEFORMED, res.t_ns, data, trace)
-        for action in res.actions:
-            if plane.wants(tid, KIND_EVENT, ACTION):
-                plane.publish(tid, KIND_EVENT, ACTION, res.t_ns, encode(action))
-        if res.contacts or dev._had_contacts:  # the value changes while touched and once at rest
-            dev._had_contacts = bool(res.contacts)
-            dev._contacts = res
-            if plane.wants(tid, KIND_PROPERTY, CONTACTS):
-                dev._contacts_json = encode(res.contact_information())
-                plane.publish(tid, KIND_PROPERTY, CONTACTS, res.t_ns, dev._contacts_json)
-            else:
-                dev._contacts_json = None
+        def sink(res: FrameResult, t_in: int) -> None:
+            frame_records(dev, tid, res, t_in, wants, publish)
+
+        await pump(dev, tid, sink, trace=self.plane.trace)
 
     # --- other Things -------------------------------------------------------------------
 
@@ -400,18 +364,9 @@ class Hub:
         """
         td = with_forms(td, thing_id, self.server.layout)
         record = record and self.writer is not None
-        start_after = None
-        if record:
-            start_after = await asyncio.to_thread(
-                self.writer.register_thing, thing_id, title=td.get("title", thing_id), family=family,
-                td=json.dumps(td), static_values=json.dumps(static_values or {}))
-        self.plane.add_stream(thing_id, record=record, start_after=start_after)
         served = ServedThing.create(thing_id, td, static_values, dynamic, record=record)
-        try:
-            self.server.expose(served)
-        except ValueError as e:
-            self.plane.remove_stream(thing_id)
-            raise DriverError(str(e)) from None
+        start_after = await self._register(served, family) if record else None
+        self._serve(served, start_after)
         return served
 
     # --- replay ---------------------------------------------------------------------
@@ -438,13 +393,15 @@ class Hub:
         td["title"] = f"{info['title']} (replay)"
         td["description"] = f"Replay of the recorded device {device_id!r} at {speed:g}x."
         static = {k: v for k, v in info["static_values"].items() if k != CONTACTS}
-        self.plane.add_stream(tid, record=False)
         served = ServedThing.create(tid, td, static, record=False)
         replayer = Replayer(self.reader, device_id, t_from_ns=t_from_ns, t_to_ns=t_to_ns, speed=speed,
                             loop=loop, names=names)
         rt = ReplayRuntime(tid, device_id, served, replayer)
         served.dynamic[CONTACTS] = lambda: rt.contacts_json
-        self.server.expose(served)
+        try:
+            self._serve(served)
+        except DriverError as e:  # the id is taken: bad input (400 from the replay action), not "no history"
+            raise ValueError(str(e)) from None
         self.replays[tid] = rt
         return rt
 
@@ -470,13 +427,11 @@ class Hub:
     def _expose_hub_thing(self) -> None:
         td = hub_td(self.config.name, self.server.layout)
         hub_replay.install(self, td)  # the replay/stopReplay actions (src/wott_hub/hub_replay.py)
-        self.plane.add_stream(HUB_THING_ID, record=False)
-        served = ServedThing.create(HUB_THING_ID, td, record=False, dynamic={
+        self._serve(ServedThing.create(HUB_THING_ID, td, record=False, dynamic={
             "devices": lambda: encode(self.devices_summary()),
             "health": lambda: encode(self.health()),
             "eventCounters": lambda: encode(self.counters()),
-        })
-        self.server.expose(served)
+        }))
 
     def devices_summary(self) -> list[dict[str, Any]]:
         out = []
@@ -518,7 +473,7 @@ class Hub:
                 "overflowDisconnects": self.plane.overflow_disconnects}
 
     async def _watch_health(self, every_s: float = 1.0) -> None:
-        memo = self._health_memo
+        memo: dict[str, tuple[str, str]] = {}
         while True:
             changed = False
             for d in list(self.devices.values()):

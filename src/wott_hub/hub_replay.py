@@ -26,6 +26,7 @@ import tornado.web
 from wott_hub.drivers.base import DriverError
 from wott_hub.history.times import parse_time
 from wott_hub.servient import HUB_THING_ID
+from wott_hub.servient.http import _Base
 
 if TYPE_CHECKING:
     from wott_hub.hub import Hub
@@ -152,19 +153,17 @@ async def stop_replay(hub: Hub, thing_id: str) -> dict[str, Any]:
         rt.task.cancel()
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await rt.task
-    hub.server.remove(thing_id)
-    hub.plane.remove_stream(thing_id)
+    hub._unserve(thing_id)
     return {"stopped": True, "emitted": rt.replayer.emitted}
 
 
-class _ActionHandler(tornado.web.RequestHandler):
-    def initialize(self, hub: Hub) -> None:
+class _ActionHandler(_Base):
+    """The hub's CORS headers and problem+json errors, for POSTs to the hub Thing's actions."""
+
+    def initialize(self, hub: Hub) -> None:  # type: ignore[override]
         self.hub = hub
 
-    def set_default_headers(self) -> None:
-        self.set_header("Access-Control-Allow-Origin", "*")
-
-    def options(self) -> None:
+    def options(self, *_args) -> None:
         self.set_header("Access-Control-Allow-Methods", "POST, OPTIONS")
         self.set_header("Access-Control-Allow-Headers", "Content-Type, Accept")
         self.set_status(204)
@@ -180,12 +179,7 @@ class _ActionHandler(tornado.web.RequestHandler):
         return value
 
     def reply(self, value: dict[str, Any]) -> None:
-        self.set_header("Content-Type", "application/json")
-        self.finish(json.dumps(value))
-
-    def write_error(self, status_code: int, **kwargs: Any) -> None:
-        self.set_header("Content-Type", "application/problem+json")
-        self.finish(json.dumps({"title": self._reason, "status": status_code}))
+        self.write_json_text(json.dumps(value))
 
 
 class _ReplayHandler(_ActionHandler):

@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from wott_hub.drivers.base import Driver, DriverError, Health, HealthStatus
+from wott_hub.drivers.base import Driver, DriverError, Health
 
 __all__ = ["RemoteDriver", "WorkerPool", "worker_main"]
 
@@ -139,7 +139,9 @@ class _Device:
         self.restarts = 0
         self.state = "starting"
         self.reason = ""
-        self.had_contacts = False
+        self._had_contacts = False  # the contact state frame_records keeps (pump.py)
+        self._contacts = None
+        self._contacts_json: str | None = None
 
 
 async def _worker(conn) -> None:
@@ -147,6 +149,7 @@ async def _worker(conn) -> None:
 
     from wott_hub.hub import processing_params
     from wott_hub.plugins import get_registry
+    from wott_hub.pump import health_state
     from wott_hub.tactile import FrameProcessor
 
     with contextlib.suppress(ValueError, OSError):
@@ -173,11 +176,7 @@ async def _worker(conn) -> None:
             await asyncio.sleep(1.0)
             report = {}
             for did, d in devices.items():
-                if d.state in ("ended", "failed", "starting"):
-                    state, reason = d.state, d.reason
-                else:
-                    h: HealthStatus = d.driver.health()
-                    state, reason = h.state.value, h.reason
+                state, reason = health_state(d)
                 report[did] = (state, reason, d.frames, d.frame_errors, d.restarts)
             send(("health", report))
 
@@ -190,8 +189,7 @@ async def _worker(conn) -> None:
                 cfg = msg[1]
                 try:
                     driver = get_registry().open_device(cfg)
-                    if hasattr(driver, "prepare"):
-                        await driver.prepare()  # e.g. a network device reads its mesh first
+                    await driver.prepare()  # e.g. a network device reads its mesh first
                     desc = driver.description
                     devices[cfg.id] = _Device(driver, FrameProcessor(desc.mesh, processing_params(desc)))
                     send(("opened", cfg.id, desc, cfg.family))
@@ -222,30 +220,21 @@ async def _close(d: _Device) -> None:
 
 
 async def _pump(did: str, d: _Device, trace: bool, send) -> None:
-    from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, encode
-    from wott_hub.hub import ACTION, CONTACTS, SKIN_DEFORMED, skin_deformed_json
-    from wott_hub.pump import pump
-
-    now = time.perf_counter_ns
+    from wott_hub.pump import frame_records, pump
 
     def records(res, t_in: int) -> None:
-        recs = []
-        tr = {"in": t_in, "proc": now()} if trace else None
-        if res.packet_due:
-            data = skin_deformed_json(res)
-            if tr is not None:
-                tr["enc"] = now()
-            recs.append((KIND_EVENT, SKIN_DEFORMED, res.t_ns, data, tr))
-        for action in res.actions:
-            recs.append((KIND_EVENT, ACTION, res.t_ns, encode(action), None))
-        if res.contacts or d.had_contacts:
-            d.had_contacts = bool(res.contacts)
-            recs.append((KIND_PROPERTY, CONTACTS, res.t_ns, encode(res.contact_information()), None))
+        recs: list[tuple] = []
+        frame_records(d, did, res, t_in, _wanted, lambda _thing, *rec: recs.append(rec))
         if recs:
             send(("recs", did, recs))
 
     await pump(d, did, records, trace=trace)
     send(("ended", did, d.reason))
+
+
+def _wanted(_thing: str, _kind: int, _name: str) -> bool:
+    """Only the hub knows who wants a record: a worker makes every one."""
+    return True
 
 
 def apply_health(driver: Driver, state: str, reason: str) -> None:

@@ -217,3 +217,24 @@ def test_websocket_json_rpc_errors_follow_wotpy(live):
     material = {"materialType": "ecoflex", "materialShoreHardness": "Shore 00-50"}
     assert ok == {"jsonrpc": "2.0", "result": material, "id": 4}
     assert write["id"] == 5 and "error" in write  # read-only, as wotpy says
+
+
+def test_history_records_each_device_td_and_static_values_as_served(live):
+    for device in DEVICES:
+        served = live.hub.server.things.get(device)
+        info = live.hub.reader.thing_info(device)
+        assert info["td"] == served.td
+        assert info["static_values"] == {k: json.loads(v) for k, v in served.static.items()}
+        assert "skinNodes" in info["static_values"]
+
+
+def test_a_replay_that_cannot_be_served_leaves_nothing_behind(live):
+    hub = live.hub
+
+    async def replay_as_pad_in_capitals():  # "Pad" and "pad" share a WebSocket URL
+        with pytest.raises(ValueError, match="Pad"):  # bad input: the replay action answers 400
+            await hub.add_replay("pad", thing_id="Pad")
+        return "Pad" in hub.plane.streams, "Pad" in hub.replays, "Pad" in hub.server.things.by_id
+
+    assert live.call(replay_as_pad_in_capitals) == (False, False, False)
+    assert httpx.get(hub.td_url("pad")).status_code == 200

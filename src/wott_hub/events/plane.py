@@ -71,7 +71,6 @@ class Stream:
     subs: dict[Interest, list[Subscriber]] = field(default_factory=dict)
     taps: list[Tap] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=lambda: defaultdict(int))
-    published: int = 0
     _commit_waiters: list[tuple[int, asyncio.Future]] = field(default_factory=list)
 
     def interested(self, kind: int, name: str) -> bool:
@@ -79,17 +78,16 @@ class Stream:
 
 
 class EventPlane:
-    def __init__(self, *, ring_size: int = 4096, max_pending: int = 100_000,
-                 history_sink: HistorySink | None = None,
-                 history_source: HistorySource | None = None,
-                 fetch_chunk: int = 5000, commit_wait_s: float = 10.0) -> None:
+    fetch_chunk = 5000  # records per history read of a resume backlog
+    commit_wait_s = 10.0  # how long a resume waits for history to commit its backlog
+
+    def __init__(self, *, ring_size: int = 4096, max_pending: int = 100_000) -> None:
         self.ring_size = ring_size
         self.ring_hard_cap = max(ring_size * 16, 65536)
         self.max_pending = max_pending
-        self.history_sink = history_sink
-        self.history_source = history_source
-        self.fetch_chunk = fetch_chunk
-        self.commit_wait_s = commit_wait_s
+        # set by the hub once the history database is open
+        self.history_sink: HistorySink | None = None
+        self.history_source: HistorySource | None = None
         self.streams: dict[str, Stream] = {}
         self.overflow_disconnects = 0
         self.trace = False  # benchmarks: stamp perf_counter_ns per stage
@@ -131,7 +129,6 @@ class EventPlane:
         st = self.streams[thing]
         st.seq += 1
         rec = Record(thing, st.seq, kind, name, t_ns, data, trace)
-        st.published += 1
         st.counts[name] += 1
         ring = st.ring
         ring.append(rec)
@@ -244,7 +241,7 @@ class EventPlane:
         return {
             thing: {
                 "seq": st.seq,
-                "published": st.published,
+                "published": sum(st.counts.values()),
                 "byName": dict(st.counts),
                 "subscribers": sum(len(v) for v in st.subs.values()),
                 "recorded": st.record,

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import json
 
-__all__ = ["KIND_EVENT", "KIND_PROPERTY", "Record", "encode"]
+__all__ = ["KIND_EVENT", "KIND_NAMES", "KIND_PROPERTY", "Record", "encode"]
 
 KIND_EVENT = 0
 KIND_PROPERTY = 1
+KIND_NAMES = {KIND_EVENT: "event", KIND_PROPERTY: "property"}
+"""A kind's name in the export/JSON Lines form of a record."""
 
 _encoder = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, check_circular=False)
 encode = _encoder.encode
@@ -50,7 +52,7 @@ class Record:
     def to_dict(self) -> dict:
         """The export/JSON Lines form of the record."""
         return {"thing": self.thing, "seq": self.seq, "t_ns": self.t_ns,
-                "kind": "property" if self.kind == KIND_PROPERTY else "event",
+                "kind": KIND_NAMES.get(self.kind, "event"),
                 "name": self.name, "data": json.loads(self.data)}
 
     def __repr__(self) -> str:

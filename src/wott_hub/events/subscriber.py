@@ -33,7 +33,6 @@ class Subscriber:
         self.overflowed = False
         self.last_seq = -1  # the last seq handed to the consumer (de-duplicates backfill vs live)
         self.gap: tuple[int, int] | None = None  # (after, first available) when history cannot fill
-        self.sent = 0
         self._wake: asyncio.Future | None = None
         self._backfill: AsyncIterator[list[Record]] | None = None
         self._on_close = on_close
@@ -70,7 +69,6 @@ class Subscriber:
                 out = [r for r in batch if r.seq > self.last_seq]
                 if out:
                     self.last_seq = out[-1].seq
-                    self.sent += len(out)
                     yield out
                 if self.closed:
                     return
@@ -89,5 +87,4 @@ class Subscriber:
                 if not batch:
                     continue
             self.last_seq = batch[-1].seq
-            self.sent += len(batch)
             yield batch

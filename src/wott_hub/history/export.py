@@ -10,11 +10,11 @@ from __future__ import annotations
 import json
 from typing import TextIO
 
+from wott_hub.events.record import KIND_NAMES
+
 from .reader import HistoryReader
 
 __all__ = ["export_jsonl"]
-
-_KINDS = {0: "event", 1: "property"}
 
 
 def export_jsonl(reader: HistoryReader, out: TextIO, thing: str, *, t_from_ns: int | None = None,
@@ -24,7 +24,8 @@ def export_jsonl(reader: HistoryReader, out: TextIO, thing: str, *, t_from_ns: i
     n = 0
     for page in reader.pages(thing, t_from_ns, t_to_ns, names):
         out.write("".join(
-            f'{head}{seq},"t_ns":{t},"kind":"{_KINDS.get(k, k)}","name":{json.dumps(name)},"data":{data}}}\n'
+            f'{head}{seq},"t_ns":{t},"kind":"{KIND_NAMES.get(k, k)}","name":{json.dumps(name)},'
+            f'"data":{data}}}\n'
             for seq, t, k, name, data in page))
         n += len(page)
     return n

@@ -44,6 +44,13 @@ class ThingSummary:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
+def _seq_range(key: int, after: int, upto: int, limit: int) -> sa.Select:
+    """(seq, t_ns, kind, name, data) of the Thing ``key`` with after < seq <= upto, in seq order."""
+    return (sa.select(_E.c.seq, _E.c.t_ns, _E.c.kind, _E.c.name, _E.c.data)
+            .where(_E.c.thing_key == key, _E.c.seq > after, _E.c.seq <= upto)
+            .order_by(_E.c.seq).limit(limit))
+
+
 class HistoryReader:
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
@@ -114,10 +121,7 @@ class HistoryReader:
         if key is None:
             return [], upto
         kind, name = interest
-        q = (sa.select(_E.c.seq, _E.c.t_ns, _E.c.kind, _E.c.name, _E.c.data)
-             .where(_E.c.thing_key == key, _E.c.seq > after, _E.c.seq <= upto)
-             .order_by(_E.c.seq).limit(limit))
-        rows = self._fetch(q)
+        rows = self._fetch(_seq_range(key, after, upto, limit))
         reached = rows[-1][0] if len(rows) == limit else upto
         recs = [Record(thing, s, k, n, t, d) for s, t, k, n, d in rows
                 if k == kind and (name is None or n == name)]
@@ -158,10 +162,7 @@ class HistoryReader:
         lo, hi = bounds
         cursor = lo - 1
         while cursor < hi:
-            q = (sa.select(_E.c.seq, _E.c.t_ns, _E.c.kind, _E.c.name, _E.c.data)
-                 .where(_E.c.thing_key == key, _E.c.seq > cursor, _E.c.seq <= hi)
-                 .order_by(_E.c.seq).limit(page))
-            rows = self._fetch(q)
+            rows = self._fetch(_seq_range(key, cursor, hi, page))
             if not rows:
                 return
             cursor = rows[-1][0]

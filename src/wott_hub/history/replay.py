@@ -37,7 +37,6 @@ class Replayer:
         self.page = page
         self.emitted = 0
         self.cycles = 0
-        self.lag_max_s = 0.0  # worst lateness of an emission against its due time
 
     async def run(self, emit: Emit, stop: asyncio.Event | None = None) -> int:
         """Emit until the range ends (or forever with ``loop``, until ``stop`` is set)."""
@@ -66,8 +65,6 @@ class Replayer:
                             if stop is not None and stop.is_set():
                                 nxt.cancel()
                                 return self.emitted
-                        elif delay < 0:
-                            self.lag_max_s = max(self.lag_max_s, -delay)
                     elif n_cycle % 2000 == 1999:
                         await asyncio.sleep(0)
                     emit(kind, name, time.time_ns(), data)
@@ -79,7 +76,6 @@ class Replayer:
                 return self.emitted
             span = (t_last - t_first) / 1e9
             gap = span / max(n_cycle - 1, 1)
-            clock0 += (span + gap) / self.speed if self.speed > 0 else 0.0
-            if self.speed == 0:
-                clock0 = loop.time()
+            if self.speed > 0:
+                clock0 += (span + gap) / self.speed
         return self.emitted

@@ -98,7 +98,6 @@ class HubDirectory:
         self.directory: Directory | None = None
         self.registrars: list[Registrar] = []
         self._workers: list[tuple[_Worker, Any]] = []  # (worker, the embedded Directory or a Registrar)
-        self.started = False
         self.router: DirectoryRouter | None = None
         if cfg.enabled:  # mounted now, without importing the directory (see routes.py)
             self.router = DirectoryRouter(hub.server.http.app)
@@ -126,7 +125,6 @@ class HubDirectory:
                 self.router.open()  # held requests go through (503 if the directory failed)
         for registrar in self.registrars:
             registrar.start()
-        self.started = True
 
     async def _open_embedded(self) -> None:
         from wott_directory import Directory, DirectorySettings, directory_handlers
@@ -201,7 +199,6 @@ class HubDirectory:
     async def stop(self) -> None:
         """Stop writing; delete the hub's Things from the ``register_to`` directories (a clean stop:
         they are gone now, not in ttl seconds); close the embedded directory (its streams end)."""
-        self.started = False
         for worker, target in self._workers:  # the local one finishes; remote ones are unregistered
             await worker.stop(finish=target is self.directory)
         for registrar in self.registrars:

@@ -26,6 +26,8 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
+from wott_hub.servient import ALL_INTERFACES
+
 from .config import DiscoveryConfig
 from .directory import OWN_ID_PREFIX
 
@@ -36,9 +38,6 @@ if TYPE_CHECKING:
 __all__ = ["HubDiscovery", "instance_label"]
 
 log = logging.getLogger("wott_hub.network")
-
-_ALL = ("0.0.0.0", "::", "")
-
 
 def instance_label(text: str, limit: int = 63) -> str:
     """A DNS-SD instance name of at most ``limit`` UTF-8 bytes (RFC 6763 4.1.1); dots become '-'
@@ -72,7 +71,7 @@ class HubDiscovery:
         if self.cfg.interfaces:
             return list(self.cfg.interfaces)
         host = self.hub.config.host
-        if host in _ALL:
+        if host in ALL_INTERFACES:
             return None
         if host == "localhost":
             return ["127.0.0.1"]
@@ -221,7 +220,7 @@ class HubDiscovery:
         log.info("adopted %s from %s as device %r (family %s)", found.id, found.url, device_id, cfg.family)
 
     def _free_id(self, wanted: str) -> str:
-        taken = set(self.hub.server.things.by_id) | set(self.hub.devices)
+        taken = self.hub.server.things.by_id  # every device of the hub is served
         if wanted not in taken:
             return wanted
         n = 2

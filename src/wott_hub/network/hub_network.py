@@ -3,7 +3,7 @@
 The hub exposes and removes Things in several places (devices, the hub Thing,
 replays started from the CLI or by the hub Thing's action, adopted devices);
 all of them go through ``HubServer.expose`` and ``HubServer.remove``. The
-network listens there, on the hub's own server object, so every served Thing
+network listens there (``on_expose``/``on_remove``), so every served Thing
 reaches the directory and mDNS whoever exposed it, and the servient keeps
 knowing nothing about directories.
 """
@@ -36,24 +36,8 @@ class HubNetwork:
         s = cfg.discovery
         self.discovery = HubDiscovery(hub, s, self.own_ids) if s.mdns or s.browse or s.directories else None
         self.started = False
-        self._listen(hub.server)
-
-    def _listen(self, server: Any) -> None:
-        expose, remove = server.expose, server.remove
-
-        def exposing(served: ServedThing) -> Any:
-            exposed = expose(served)
-            self._exposed(served)
-            return exposed
-
-        def removing(thing_id: str) -> None:
-            served = server.things.get(thing_id)
-            remove(thing_id)
-            if served is not None:
-                self._removed(served)
-
-        server.expose = exposing
-        server.remove = removing
+        hub.server.on_expose.append(self._exposed)
+        hub.server.on_remove.append(self._removed)
 
     def _exposed(self, served: ServedThing) -> None:
         tid = served.td.get("id")

@@ -25,7 +25,6 @@ class ServingContext:
     heartbeat_s: float = 15.0
     sse: set[Any] = field(default_factory=set)  # open SSE/long-poll handlers
     ws: set[Any] = field(default_factory=set)  # open WebSocket handlers
-    requests: int = 0
     # set once every stream continues its recorded sequence: resumes wait for it
     streams_ready: asyncio.Event = field(default_factory=asyncio.Event)
     _heartbeat: PeriodicCallback | None = None

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import tornado.web
@@ -30,7 +30,10 @@ from .http import CatalogueHandler, TDHandler, routes
 from .things import ServedThing, ThingRegistry
 from .ws import FastWebsocketHandler
 
-__all__ = ["HubServer"]
+__all__ = ["ALL_INTERFACES", "HubServer"]
+
+ALL_INTERFACES = ("0.0.0.0", "::", "")
+"""Hosts that mean "listen on every interface" (clients are told 127.0.0.1 instead)."""
 
 
 class _WotpyBridge:
@@ -68,8 +71,11 @@ class HubServer:
                  extra_handlers: Sequence[tuple] = ()) -> None:
         self.plane = plane
         self.host = host
-        self.public_host = public_host or (host if host not in ("0.0.0.0", "::", "") else "127.0.0.1")
+        self.public_host = public_host or (host if host not in ALL_INTERFACES else "127.0.0.1")
         self.things = ThingRegistry()
+        # told of every Thing served and removed, whoever does it (the hub's network: directory, mDNS)
+        self.on_expose: list[Callable[[ServedThing], None]] = []
+        self.on_remove: list[Callable[[ServedThing], None]] = []
         self.ctx = ServingContext(plane, self.things, FormLayout(f"http://{self.public_host}:{http_port}"))
         self.http = HubHTTPServer(http_port, host=host, handlers=[*extra_handlers, *routes(self.ctx),
                                                                      *web_routes()])
@@ -151,12 +157,18 @@ class HubServer:
         self.servient.enable_exposed_thing(thing.title)
         served.exposed = exposed
         self.plane.stream(served.id).taps.append(_WotpyBridge(exposed))
+        for listener in self.on_expose:
+            listener(served)
         return exposed
 
     def remove(self, thing_id: str) -> None:
         served = self.things.remove(thing_id)
-        if served is not None and served.exposed is not None:
+        if served is None:
+            return
+        if served.exposed is not None:
             self.servient.remove_exposed_thing(served.exposed.thing.title)
+        for listener in self.on_remove:
+            listener(served)
 
     def td_url(self, thing_id: str) -> str:
         return self.layout.thing_url(thing_id)

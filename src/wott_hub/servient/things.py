@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -74,8 +74,17 @@ class ServedThing:
         return value
 
     def read_all(self) -> str:
-        parts = [f"{json.dumps(n)}:{self.read(n)}" for n in self.property_names]
-        return "{" + ",".join(parts) + "}"
+        return _json_object((n, self.read(n)) for n in self.property_names)
+
+    def static_json(self) -> str:
+        """The static values as one JSON object (what history records), spliced from the texts
+        encoded for serving: a barrel's mesh is not decoded and encoded again."""
+        return _json_object(self.static.items())
+
+
+def _json_object(items: Iterable[tuple[str, str]]) -> str:
+    """``{name: value}`` from already-encoded values."""
+    return "{" + ",".join([f"{json.dumps(n)}:{v}" for n, v in items]) + "}"
 
 
 class ThingRegistry:
