@@ -67,11 +67,6 @@ export async function invokeAction(td, name, input) {
   return r.json();
 }
 
-// One Server-Sent Events stream that survives drops: on an error it reopens at
-// once (then backing off up to 5 s) asking for what came after the last id it
-// saw, so nothing is lost and nothing repeats. EventSource cannot set the
-// Last-Event-ID header on a fresh connection, so the id goes in ``lastEventId=``,
-// which the hub's SSE endpoints accept like the header.
 // What both kinds of stream share: a state for the page to show, and reopening with
 // exponential backoff (up to 5 s) after a drop, until closed.
 class Reconnecting {
@@ -103,6 +98,11 @@ class Reconnecting {
   }
 }
 
+// One Server-Sent Events stream that survives drops: on an error it reopens at
+// once (then backing off up to 5 s) asking for what came after the last id it
+// saw, so nothing is lost and nothing repeats. EventSource cannot set the
+// Last-Event-ID header on a fresh connection, so the id goes in ``lastEventId=``,
+// which the hub's SSE endpoints accept like the header.
 export class SseStream extends Reconnecting {
   constructor(url, names, onEvent, {after = null, onState = null} = {}) {
     super(onState, 100);
@@ -277,8 +277,9 @@ export async function discover() {
     }));
   }
   let hub = things.find((t) => isHubThing(t.td)) || null;
-  if (!hub) {
-    // the hub Thing is not in the directory: find it in the servient's catalogue
+  if (!hub && source === "directory") {
+    // the hub Thing is not in the directory: find it in the servient's catalogue (when the
+    // list came from that catalogue, every TD in it was just read)
     try {
       const cat = await getJSON("/wot");
       const ids = Object.keys(cat).sort((a, b) => (b === "hub") - (a === "hub")); // the usual id first
