@@ -60,6 +60,15 @@ def _ready() -> None:
     print("ready", flush=True)
 
 
+async def _measure(tasks: list[asyncio.Task], duration: float) -> None:
+    """Tell the hub side the client is subscribed, receive for ``duration``, then stop."""
+    _ready()
+    await asyncio.sleep(duration)
+    for t in tasks:
+        t.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
+
+
 async def _sse_client(urls: list[str], duration: float) -> dict:
     import httpx
     from httpx_sse import aconnect_sse
@@ -84,11 +93,7 @@ async def _sse_client(urls: list[str], duration: float) -> dict:
     async with httpx.AsyncClient(timeout=None, limits=limits) as c:
         tasks = [asyncio.create_task(one(i, u, c)) for i, u in enumerate(urls)]
         await asyncio.wait_for(all_connected.wait(), 30)
-        _ready()
-        await asyncio.sleep(duration)
-        for t in tasks:
-            t.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        await _measure(tasks, duration)
     return {"events": got}
 
 
@@ -180,11 +185,7 @@ async def _ws_latency_client(urls: list[str], event: str, duration: float) -> di
     started = [loop.create_future() for _ in urls]
     tasks = [asyncio.create_task(one(i, u, f)) for i, (u, f) in enumerate(zip(urls, started, strict=True))]
     await asyncio.gather(*started)
-    _ready()
-    await asyncio.sleep(duration)
-    for t in tasks:
-        t.cancel()
-    await asyncio.gather(*tasks, return_exceptions=True)
+    await _measure(tasks, duration)
     return {"events": got}
 
 
