@@ -13,7 +13,7 @@ import asyncio
 import inspect
 import logging
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import Any, TypeVar
 
 from zeroconf import ServiceStateChange, Zeroconf
 from zeroconf.asyncio import AsyncServiceBrowser, AsyncServiceInfo, AsyncZeroconf
@@ -25,6 +25,7 @@ __all__ = ["Browser"]
 log = logging.getLogger("wott_hub.discovery")
 
 Callback = Callable[[ServiceRecord], Any | Awaitable[Any]]
+T = TypeVar("T")
 
 
 class Browser:
@@ -98,9 +99,10 @@ class Browser:
             await _call(self.on_update, rec)
 
 
-async def _call(callback: Callback | None, rec: ServiceRecord) -> None:
+async def _call(callback: Callable[[T], Any] | None, arg: T) -> None:
+    """Call a callback (plain function or coroutine function) if there is one."""
     if callback is None:
         return
-    result = callback(rec)
+    result = callback(arg)
     if inspect.isawaitable(result):
         await result

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import inspect
 import json
 import logging
 from collections.abc import Awaitable, Callable
@@ -30,13 +29,14 @@ from urllib.parse import urljoin, urlsplit
 from tornado.httpclient import AsyncHTTPClient, HTTPClientError, HTTPRequest
 from wott_directory.client import DirectoryClient, ProblemError
 
+from .browser import _call
 from .records import ServiceRecord
 
 __all__ = ["Explorer", "FoundThing", "registry_claim", "td_kind"]
 
 log = logging.getLogger("wott_hub.discovery")
 
-TD_ACCEPT = "application/td+json, application/json;q=0.9"
+TD_ACCEPT = "application/td+json, application/json;q=0.9"  # also what wot-remote devices are asked
 
 
 def td_kind(td: dict[str, Any]) -> str:
@@ -112,8 +112,7 @@ class Explorer:
     async def fetch_record(self, rec: ServiceRecord) -> tuple[dict[str, Any], str]:
         """The TD of a service, trying each of its addresses (a stale one may linger in caches)."""
         errors = []
-        hosts = [f"[{a}]" if ":" in a else a for a in rec.addresses] or [rec.server.rstrip(".")]
-        for host in hosts:
+        for host in rec.hosts:
             url = f"{rec.scheme}://{host}:{rec.port}{rec.td_path}"
             try:
                 return await self.fetch_td(url), url
@@ -283,11 +282,3 @@ def _consumed(td: dict[str, Any], url: str) -> dict[str, Any]:
         parts = urlsplit(url)
         out["base"] = f"{parts.scheme}://{parts.netloc}/"
     return out
-
-
-async def _call(callback: Callback | None, found: FoundThing) -> None:
-    if callback is None:
-        return
-    result = callback(found)
-    if inspect.isawaitable(result):
-        await result

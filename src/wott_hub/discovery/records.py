@@ -53,11 +53,13 @@ class ServiceRecord:
         return self.name.removesuffix("." + WOT_TCP)
 
     @property
+    def hosts(self) -> list[str]:
+        """Each address as it goes in a URL (IPv6 in brackets); the server name when there is none."""
+        return [f"[{a}]" if ":" in a else a for a in self.addresses] or [self.server.rstrip(".")]
+
+    @property
     def host(self) -> str:
-        if self.addresses:
-            addr = self.addresses[0]
-            return f"[{addr}]" if ":" in addr else addr
-        return self.server.rstrip(".")
+        return self.hosts[0]
 
     @property
     def url(self) -> str:
@@ -67,11 +69,6 @@ class ServiceRecord:
     @property
     def base_url(self) -> str:
         return f"{self.scheme}://{self.host}:{self.port}/"
-
-    def as_service(self) -> dict[str, Any]:
-        """The plain dict the plugin hook ``wott_hub_claim_service`` takes."""
-        return {"name": self.name, "type": WOT_TCP, "server": self.server, "addresses": list(self.addresses),
-                "port": self.port, "properties": dict(self.properties)}
 
     @classmethod
     def from_info(cls, info: Any, is_directory: bool = False) -> ServiceRecord | None:

@@ -57,7 +57,6 @@ FAMILY = "wot-remote"
 SKIN = ("skinNodes", "skinCells")
 EVENT = "skinDeformedDetection"
 _ROUNDING_MM = 0.0006  # a packet's intensities are rounded to 1 µm; one step and a margin
-_TD_ACCEPT = "application/td+json, application/json;q=0.9"
 
 
 # --- reading a TD's forms ---------------------------------------------------------------
@@ -240,7 +239,11 @@ class RemoteWoTDriver(Driver):
         try:
             async with self._client() as client:
                 if self.td is None:
-                    resp = await client.get(self.td_url, headers={"Accept": _TD_ACCEPT})
+                    # not at module level: discovery (zeroconf, the directory client) stays off the
+                    # hub's start-up path
+                    from wott_hub.discovery.explorer import TD_ACCEPT
+
+                    resp = await client.get(self.td_url, headers={"Accept": TD_ACCEPT})
                     resp.raise_for_status()
                     self.td = resp.json()
                     if not isinstance(self.td, dict):
@@ -377,10 +380,6 @@ class RemoteWoTDriver(Driver):
         if self._reader is not None:
             self._reader.cancel()
             self._start_reader()
-
-    def lost(self, reason: str) -> None:
-        """Discovery no longer sees the device; the stream (if any) says the rest."""
-        self.set_health(Health.disconnected, reason)
 
     async def close(self) -> None:
         self._closed = True

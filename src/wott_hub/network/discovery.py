@@ -61,7 +61,6 @@ class HubDiscovery:
         self.failed: dict[str, str] = {}  # foreign TD id -> why adopting it failed
         self._names: dict[str, str] = {}  # served Thing id -> full mDNS instance name
         self._tasks: set[asyncio.Task[Any]] = set()
-        self._directory_name: str | None = None
         self.started = False
 
     # --- where mDNS runs ---------------------------------------------------------------
@@ -110,7 +109,7 @@ class HubDiscovery:
             from wott_hub.discovery import Explorer
 
             self.explorer = Explorer(on_found=self._found, on_updated=self._updated, on_lost=self._lost,
-                                     claim=_claim, own_ids=self.own_ids, follow_directories=cfg.browse)
+                                     own_ids=self.own_ids, follow_directories=cfg.browse)
             if self.zc is not None and cfg.browse:
                 from wott_hub.discovery import Browser
 
@@ -148,12 +147,11 @@ class HubDiscovery:
     def _is_own_service(self, name: str) -> bool:
         if self.announcer is None:
             return False
-        return name in self.announcer.names or name in self._names.values() or name == self._directory_name
+        return name in self.announcer.names or name in self._names.values()
 
     async def _announce_directory(self, port: int) -> None:
         try:
-            self._directory_name = await self.announcer.announce_directory(
-                instance_label(self.hub.config.name), port)
+            await self.announcer.announce_directory(instance_label(self.hub.config.name), port)
         except Exception as e:
             log.warning("could not announce the directory on mDNS: %s", e)
 
@@ -231,13 +229,15 @@ class HubDiscovery:
     async def _updated(self, found: FoundThing) -> None:
         """A new TD or address of a Thing already found: re-target its device (same device id,
         same sequence for clients), or adopt it now if that had failed."""
+        from wott_hub.discovery import registry_claim
+
         if not self.started or not self._may_adopt(found):
             return
         device_id = self.adopted.get(found.id)
         dev = self.hub.devices.get(device_id) if device_id is not None else None
         if dev is None:
             if found.config is None:
-                found.config = _claim(found.td)
+                found.config = registry_claim(found.td)
             if found.config is not None:
                 await self._adopt(found)
             return
@@ -246,7 +246,7 @@ class HubDiscovery:
             retarget(found.td)
             log.info("device %r (%s) moved to %s", device_id, found.id, found.url)
             return
-        new = _claim(found.td)  # a plugin's driver without retarget: open it again
+        new = registry_claim(found.td)  # a plugin's driver without retarget: open it again
         await self.hub.remove_device(device_id)
         self.adopted.pop(found.id, None)
         if new is not None:
@@ -261,19 +261,9 @@ class HubDiscovery:
         if dev is None:
             return
         reason = "no longer announced (mDNS goodbye or deleted from its directory)"
-        lost = getattr(dev.driver, "lost", None)
-        if lost is not None:
-            lost(reason)
-        else:
-            dev.driver.set_health(Health.disconnected, reason)
+        dev.driver.set_health(Health.disconnected, reason)
         log.info("device %r (%s) is gone: %s", device_id, found.id, reason)
 
     def describe(self) -> dict[str, Any]:
         return {"mdns": self.announcer is not None, "browsing": self.browser is not None,
                 "adopted": dict(self.adopted), "unclaimed": dict(self.unclaimed), "failed": dict(self.failed)}
-
-
-def _claim(td: dict[str, Any]) -> Any:
-    from wott_hub.plugins import get_registry
-
-    return get_registry().claim(td)
