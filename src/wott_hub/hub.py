@@ -35,7 +35,8 @@ from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, encode
 from wott_hub.network import HubNetwork
 from wott_hub.pump import CONTACTS, frame_records, health_state, pump, skin_deformed_json
 from wott_hub.servient import HUB_THING_ID, HubServer, ServedThing, clean_td, hub_td, with_forms
-from wott_hub.tactile import FrameProcessor, FrameResult, ProcessingParams
+from wott_hub.tactile import FrameProcessor, FrameResult
+from wott_hub.tactile.processing import processing_params  # also imported from here by hub_workers
 from wott_hub.td.builder import build_tactile_td, static_property_values
 
 __all__ = ["DeviceRuntime", "Hub", "ReplayRuntime", "demo_devices", "serve", "skin_deformed_json"]
@@ -83,12 +84,6 @@ class ReplayRuntime:
     task: asyncio.Task | None = None
     contacts_json: str = _NO_CONTACTS
     state: str = "running"
-
-
-def processing_params(desc) -> ProcessingParams:
-    """Processing settings from what the device says about itself."""
-    return ProcessingParams(epsilon_mm=desc.epsilon_mm, modulus_mpa=desc.material.modulus_mpa,
-                            thickness_mm=desc.thickness_mm)
 
 
 class Hub:

@@ -20,7 +20,7 @@ async def _cli(*args: str) -> tuple[int, str, str]:
     return proc.returncode, out.decode(), err.decode()
 
 
-def test_directory_query_and_list():
+def test_directory_query_and_list(run):
     async def scenario():
         server = await DirectoryServer(Directory(DirectorySettings(token="t")), prefix="/tdd").start()
         client = DirectoryClient(server.url, token="t")
@@ -42,4 +42,4 @@ def test_directory_query_and_list():
             client.close()
             await server.stop()
 
-    asyncio.run(asyncio.wait_for(scenario(), 120))
+    run(scenario(), 120)

@@ -22,23 +22,8 @@ from wott_hub.hub import Hub
 from wott_hub.network import DiscoveryConfig
 from wott_hub.td.validate import validate_td
 
-SIM = Path(__file__).with_name("wot_device_sim.py")
 WOTT_HUB = Path(sys.executable).with_name("wott-hub")
 FOREIGN = "urn:example:wot-skin-7"
-
-
-async def start_sim(host: str) -> tuple[asyncio.subprocess.Process, str]:
-    proc = await asyncio.create_subprocess_exec(sys.executable, str(SIM), "--host", host, "--name", "skin-7",
-                                                "--id", FOREIGN, stdout=asyncio.subprocess.PIPE)
-    line = (await asyncio.wait_for(proc.stdout.readline(), 30)).decode()
-    assert line.startswith("READY "), line
-    return proc, line.split()[1].removesuffix("td")
-
-
-async def stop_sim(proc: asyncio.subprocess.Process) -> None:
-    if proc.returncode is None:
-        proc.terminate()
-        await asyncio.wait_for(proc.wait(), 15)
 
 
 class Collector:
@@ -73,7 +58,8 @@ def same_packets(source: list[dict[str, Any]], reexposed: list[dict[str, Any]]) 
             {n["deformedNodeID"]: n["deformedNodeIntensity"] for n in p["arrayOfDeformedNodes"]}
 
 
-def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(tmp_path, wait_for):
+def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(tmp_path, wait_for, run,
+                                                                              device_sim):
     async def scenario() -> None:
         cfg = HubConfig(name="hub-under-test", http_port=0, ws_port=0, database=str(tmp_path / "hub.db"),
                         discovery=DiscoveryConfig(mdns=True, browse=True))
@@ -87,7 +73,8 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
             discover = await asyncio.create_subprocess_exec(
                 str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "2", "--json",
                 stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-            sim, sim_url = await start_sim("127.0.0.1")
+            sim = await device_sim("127.0.0.1", "skin-7", FOREIGN).start()
+            sim_url = sim.base
             out, err = await asyncio.wait_for(discover.communicate(), 60)
             assert discover.returncode == 0, err.decode()
             rows = {r["name"]: r for r in json.loads(out)}
@@ -136,12 +123,13 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
             assert len(collector.packets) == seen + len(pressed_offline)  # none twice
 
             # the device leaves: the re-exposed device stays, disconnected
-            await stop_sim(sim)
+            await sim.stop()
             await wait_for(lambda: dev.health_state()[0] == "disconnected", what="marked disconnected")
             assert "skin-7" in hub.devices
 
             # ... and comes back on another address: the same device, re-targeted
-            sim, sim_url = await start_sim("127.0.0.2")
+            sim = await device_sim("127.0.0.2", "skin-7", FOREIGN).start()
+            sim_url = sim.base
             await wait_for(lambda: dev.driver.td["base"].startswith("http://127.0.0.2:")
                            and dev.health_state()[0] == "ok", what="re-targeted to 127.0.0.2")
             assert sorted(hub.devices) == ["skin-7"] and hub.devices["skin-7"] is dev
@@ -154,7 +142,7 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
                 await collector.close()
             await http.aclose()
             if sim is not None:
-                await stop_sim(sim)
+                await sim.stop()
             await hub.stop()
 
-    asyncio.run(asyncio.wait_for(scenario(), 90))
+    run(scenario(), 90)

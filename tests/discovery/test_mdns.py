@@ -26,34 +26,8 @@ from wott_hub.plugins.registry import Registry
 from wott_hub.td.builder import build_tactile_td
 from wott_hub.td.validate import validate_td
 
-SIM = Path(__file__).with_name("wot_device_sim.py")
 WOTT_HUB = Path(sys.executable).with_name("wott-hub")
 TOKEN = "t0ken"
-
-
-def run(coro: Any, timeout: float = 60) -> Any:
-    return asyncio.run(asyncio.wait_for(coro, timeout))
-
-
-class Sim:
-    """The WoT device simulator in its own process."""
-
-    def __init__(self, host: str, name: str = "skin-7", thing_id: str = "urn:example:wot-skin-7") -> None:
-        self.proc: asyncio.subprocess.Process | None = None
-        self.args = [sys.executable, str(SIM), "--host", host, "--name", name, "--id", thing_id]
-        self.url = ""
-
-    async def start(self) -> Sim:
-        self.proc = await asyncio.create_subprocess_exec(*self.args, stdout=asyncio.subprocess.PIPE)
-        line = (await asyncio.wait_for(self.proc.stdout.readline(), 30)).decode()
-        assert line.startswith("READY "), line
-        self.url = line.split()[1]
-        return self
-
-    async def stop(self) -> None:
-        if self.proc is not None and self.proc.returncode is None:
-            self.proc.terminate()
-            await asyncio.wait_for(self.proc.wait(), 15)
 
 
 class ForeignTactilePlugin:
@@ -78,7 +52,7 @@ def registry() -> Registry:
     return reg
 
 
-def test_hub_announcements_are_found_by_another_process(wait_for):
+def test_hub_announcements_are_found_by_another_process(wait_for, run):
     # introduction-dns-sd, -service-name, -service-name-directory, -txt-record
     async def scenario():
         directory = Directory(DirectorySettings(token=TOKEN))
@@ -140,7 +114,7 @@ def test_hub_announcements_are_found_by_another_process(wait_for):
     run(scenario(), 90)
 
 
-def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wait_for):
+def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wait_for, run, device_sim):
     # discoverer-must-support-intros, -fetching, -merge-intros, -td-identify, -track
     events: list[tuple[str, FoundThing]] = []
 
@@ -151,7 +125,7 @@ def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wai
         aiozc = AsyncZeroconf(interfaces=["127.0.0.1"])
         browser = Browser(aiozc, explorer.service_added, explorer.service_updated, explorer.service_removed)
         await browser.start()
-        sim = await Sim("127.0.0.1").start()
+        sim = await device_sim("127.0.0.1").start()
         try:
             await wait_for(lambda: events)
             kind, found = events[0]
@@ -165,7 +139,7 @@ def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wai
             await wait_for(lambda: len(events) >= 2)
             assert events[1][0] == "lost" and not events[1][1].present
 
-            sim = await Sim("127.0.0.2").start()  # ... and comes back on another address
+            sim = await device_sim("127.0.0.2").start()  # ... and comes back on another address
             await wait_for(lambda: len(events) >= 3)
             kind, again = events[2]
             assert kind == "updated" and again is found  # the same Thing, not a second one
@@ -181,7 +155,7 @@ def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wai
     run(scenario(), 120)
 
 
-def test_things_registered_in_a_known_directory(registry, wait_for):
+def test_things_registered_in_a_known_directory(registry, wait_for, run):
     # discoverer-fetch-tdd, exploration via a directory: listing first, then its events
     events: list[tuple[str, str]] = []
 

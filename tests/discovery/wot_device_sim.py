@@ -33,7 +33,8 @@ from zeroconf.asyncio import AsyncZeroconf
 from wott_hub.discovery import Announcer
 from wott_hub.examples import example_device
 from wott_hub.sim.scene import Scene
-from wott_hub.tactile import FrameProcessor, ProcessingParams, TactileFrame
+from wott_hub.tactile import FrameProcessor, TactileFrame
+from wott_hub.tactile.processing import processing_params
 from wott_hub.td.builder import build_tactile_td, static_property_values
 from wott_hub.td.forms import PREFIX
 
@@ -69,9 +70,7 @@ class Device:
         scene = Scene.from_dict({"scene": {"name": "press", "loop": False}, "step": [
             {"kind": "press", "at": at, "start_s": 0.0, "duration_s": 0.25, "depth_mm": 1.0,
              "radius_mm": 4.0}]})
-        params = ProcessingParams(epsilon_mm=d.epsilon_mm, modulus_mpa=d.material.modulus_mpa,
-                                  thickness_mm=d.thickness_mm)
-        proc = FrameProcessor(mesh, params)
+        proc = FrameProcessor(mesh, processing_params(d))  # what the hub would use for this device
         out, t0 = [], time.time_ns()
         for k in range(int(0.35 * 60) + 1):
             t = k / 60

@@ -58,11 +58,9 @@ def test_epsilon_keeps_every_node_a_packet_can_carry():
     assert re_exposed_epsilon({}) == 0.1 and re_exposed_epsilon({"tac:epsilon": 0.1}, 0.3) == 0.3
 
 
-def test_a_hub_re_exposes_another_hubs_device_from_its_td_url(tmp_path):
+def test_a_hub_re_exposes_another_hubs_device_from_its_td_url(press_scene, wait_for, run):
     mesh = example_device("flat").mesh
-    at = [round(float(v), 3) for v in mesh.nodes[mesh.free_indices[len(mesh.free_indices) // 2]]]
-    source_device = DeviceConfig("pad", "scene", {"shape": "flat", "loop": True, "rate_hz": 60.0, "step": [
-        {"kind": "press", "at": at, "start_s": 0.2, "duration_s": 0.3, "depth_mm": 1.0, "radius_mm": 4.0}]})
+    source_device = press_scene("pad", "flat", start_s=0.2)
 
     async def collect(url: str, out: list[dict], opened: asyncio.Event) -> None:
         async with httpx.AsyncClient(timeout=httpx.Timeout(5, read=None)) as c, \
@@ -109,10 +107,9 @@ def test_a_hub_re_exposes_another_hubs_device_from_its_td_url(tmp_path):
                      asyncio.ensure_future(collect(f"{b.td_url('palm')}/events/skinDeformedDetection", copy_,
                                                    opened[1]))]
             await asyncio.wait_for(asyncio.gather(*(o.wait() for o in opened)), 10)
-            deadline = asyncio.get_running_loop().time() + 10
-            while not (len(copy_) >= 12 and source):
-                assert asyncio.get_running_loop().time() < deadline, (len(source), len(copy_))
-                await asyncio.sleep(0.05)
+            await wait_for(lambda: len(copy_) >= 12 and source, timeout=10,
+                           what=lambda: f"12 re-exposed packets and a source one (source {len(source)}, "
+                                        f"re-exposed {len(copy_)})")
             by_time = {p["timeStamp"]: p for p in source}
             matched = [p for p in copy_ if p["timeStamp"] in by_time]
             assert len(matched) >= 10
@@ -126,4 +123,4 @@ def test_a_hub_re_exposes_another_hubs_device_from_its_td_url(tmp_path):
             await b.stop()
             await a.stop()
 
-    asyncio.run(asyncio.wait_for(scenario(), 60))
+    run(scenario(), 60)

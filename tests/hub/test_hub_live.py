@@ -13,7 +13,6 @@ import time
 
 import httpx
 import pytest
-from httpx_sse import connect_sse
 
 from wott_hub.config import HubConfig
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
@@ -91,15 +90,14 @@ def test_hub_thing_lists_devices_health_and_counters(live, http):
     assert counters["things"]["pad"]["published"] > 0 and counters["history"]["written"] > 0
 
 
-def _sse_events(url, n, headers=None, timeout=10.0):
-    out = []
-    with httpx.Client(timeout=timeout) as c, connect_sse(c, "GET", url, headers=headers or {}) as es:
-        assert es.response.headers["content-type"].startswith("text/event-stream")
-        for ev in es.iter_sse():
-            out.append((int(ev.id), ev.event, ev.data))
-            if len(out) >= n:
-                break
-    return out
+@pytest.fixture(scope="module")
+def sse(sse_events):
+    """The first n events of a stream as (id, name, data), asserting its Content-Type."""
+    def read(url, n, headers=None):
+        return [(int(ev.id), ev.event, ev.data)
+                for ev in sse_events(url, n, headers=headers, timeout=10, assert_content_type=True)]
+
+    return read
 
 
 def _recorded(live, device, kind, name=None):
@@ -109,12 +107,12 @@ def _recorded(live, device, kind, name=None):
     return {r.seq: r for r in recs}
 
 
-def test_sse_resume_with_last_event_id_loses_nothing_and_repeats_nothing(live):
+def test_sse_resume_with_last_event_id_loses_nothing_and_repeats_nothing(live, sse):
     url = f"{live.hub.td_url('pad')}/events"  # every event of the device
-    first = _sse_events(url, 40)
+    first = sse(url, 40)
     time.sleep(0.5)  # the device keeps publishing while the client is away (> ring_size records)
     last_id = first[-1][0]
-    second = _sse_events(url, 120, headers={"Last-Event-ID": str(last_id)})
+    second = sse(url, 120, headers={"Last-Event-ID": str(last_id)})
     got = first + second
     ids = [i for i, _, _ in got]
     assert len(ids) == len(set(ids)), "duplicate events"
@@ -126,11 +124,11 @@ def test_sse_resume_with_last_event_id_loses_nothing_and_repeats_nothing(live):
         assert recorded[i].name == name and recorded[i].data == data
 
 
-def test_one_event_stream_resumes_from_history_too(live):
+def test_one_event_stream_resumes_from_history_too(live, sse):
     url = f"{live.hub.td_url('cyl')}/events/skinDeformedDetection"
-    first = _sse_events(url, 10)
+    first = sse(url, 10)
     time.sleep(0.3)
-    second = _sse_events(url, 60, headers={"Last-Event-ID": str(first[-1][0])})
+    second = sse(url, 60, headers={"Last-Event-ID": str(first[-1][0])})
     ids = [i for i, _, _ in first + second]
     recorded = _recorded(live, "cyl", KIND_EVENT, "skinDeformedDetection")
     assert ids == [s for s in sorted(recorded) if ids[0] <= s <= ids[-1]]
@@ -139,9 +137,9 @@ def test_one_event_stream_resumes_from_history_too(live):
                for _, _, d in second[:5])
 
 
-def test_contact_information_is_observable_over_sse(live):
+def test_contact_information_is_observable_over_sse(live, sse):
     url = f"{live.hub.td_url('pad')}/properties/contactInformation/observe"
-    got = _sse_events(url, 5)
+    got = sse(url, 5)
     assert all(name == "contactInformation" for _, name, _ in got)
     td = httpx.get(live.hub.td_url("pad")).json()
     assert all(validate_payload(td, "property", "contactInformation", json.loads(d)) == [] for *_, d in got)

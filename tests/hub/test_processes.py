@@ -12,7 +12,6 @@ from pathlib import Path
 
 import httpx
 import pytest
-from httpx_sse import connect_sse
 
 from wott_hub.events.record import KIND_EVENT
 from wott_hub.history import HistoryReader, create_engine, database_url
@@ -63,15 +62,14 @@ def _start(args, cwd) -> tuple[subprocess.Popen, dict]:
     return proc, json.loads(line)
 
 
-def _read_sse(url, n, last_id=None):
-    headers = {"Last-Event-ID": str(last_id)} if last_id is not None else {}
-    out = []
-    with httpx.Client(timeout=15) as c, connect_sse(c, "GET", url, headers=headers) as es:
-        for ev in es.iter_sse():
-            out.append((int(ev.id), ev.data))
-            if len(out) >= n:
-                break
-    return out
+@pytest.fixture(scope="module")
+def read_sse(sse_events):
+    """The first n events of a stream as (id, data), resuming after ``last_id`` if given."""
+    def read(url, n, last_id=None):
+        headers = {"Last-Event-ID": str(last_id)} if last_id is not None else {}
+        return [(int(ev.id), ev.data) for ev in sse_events(url, n, headers=headers, timeout=15)]
+
+    return read
 
 
 def _rows(db):
@@ -84,11 +82,11 @@ def _rows(db):
         engine.dispose()
 
 
-def test_sigkill_mid_stream_then_restart_loses_nothing_committed(config_file, tmp_path):
+def test_sigkill_mid_stream_then_restart_loses_nothing_committed(config_file, tmp_path, read_sse):
     proc, info = _start(["run", "--config", str(config_file), "--json"], tmp_path)
     try:
         events_url = f"{info['devices']['pad']}/events"
-        seen = _read_sse(events_url, 150)
+        seen = read_sse(events_url, 150)
         committed = httpx.get(f"{info['hub']}/properties/eventCounters").json()["history"]["written"]
         assert committed > 0
     finally:
@@ -105,7 +103,7 @@ def test_sigkill_mid_stream_then_restart_loses_nothing_committed(config_file, tm
 
     proc, info = _start(["run", "--config", str(config_file), "--json"], tmp_path)
     try:
-        resumed = _read_sse(f"{info['devices']['pad']}/events", 100, last_id=last_seen)
+        resumed = read_sse(f"{info['devices']['pad']}/events", 100, last_id=last_seen)
     finally:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(30) == 0  # clean shutdown
@@ -116,10 +114,10 @@ def test_sigkill_mid_stream_then_restart_loses_nothing_committed(config_file, tm
     assert all(rows_after[i] == (KIND_EVENT, d) for i, d in resumed)  # SIGTERM wrote everything streamed
 
 
-def test_history_and_replay_commands(config_file, tmp_path):
+def test_history_and_replay_commands(config_file, tmp_path, read_sse, sse_events):
     proc, info = _start(["run", "--config", str(config_file), "--json"], tmp_path)
     try:
-        _read_sse(f"{info['devices']['pad']}/events", 200)
+        read_sse(f"{info['devices']['pad']}/events", 200)
     finally:
         proc.send_signal(signal.SIGINT)
         assert proc.wait(30) == 0
@@ -141,12 +139,7 @@ def test_history_and_replay_commands(config_file, tmp_path):
     try:
         td = httpx.get(rinfo["td"]).json()
         assert td["title"].endswith("(replay)") and "skinDeformedDetection" in td["events"]
-        got = []
-        with httpx.Client(timeout=15) as c, connect_sse(c, "GET", rinfo["events"]) as es:
-            for ev in es.iter_sse():
-                got.append((ev.event, json.loads(ev.data)))
-                if len(got) >= 50:
-                    break
+        got = [(ev.event, json.loads(ev.data)) for ev in sse_events(rinfo["events"], 50, timeout=15)]
     finally:
         proc.send_signal(signal.SIGTERM)
         proc.wait(30)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import httpx
-from httpx_sse import connect_sse
 
 from wott_hub.config import HubConfig
 from wott_hub.events.record import KIND_EVENT
@@ -11,7 +10,8 @@ from wott_hub.plugins import DeviceConfig
 from wott_hub.td.validate import validate_td
 
 
-def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path, hub_thread, scene):
+def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path, hub_thread, scene,
+                                                                       sse_events):
     cfg = HubConfig(http_port=0, ws_port=0, database=str(tmp_path / "hub.db"), workers=1,
                     devices=(scene("pad", "flat"), scene("cyl", "cylinder"),
                              DeviceConfig("broken", "scene", {"shape": "flat"})))  # no scene: fails
@@ -23,12 +23,7 @@ def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path,
         td = httpx.get(hub.td_url("pad")).json()
         assert validate_td(td) == [] and td["properties"]["skinNodes"]
         assert httpx.get(f"{hub.td_url('pad')}/properties/skinNodes").json()["numOfNodes"] == 256
-        got = []
-        with httpx.Client(timeout=20) as c, connect_sse(c, "GET", f"{hub.td_url('pad')}/events") as es:
-            for ev in es.iter_sse():
-                got.append((int(ev.id), ev.data))
-                if len(got) >= 30:
-                    break
+        got = [(int(ev.id), ev.data) for ev in sse_events(f"{hub.td_url('pad')}/events", 30, timeout=20)]
         assert ht.call(lambda: hub.writer.flush())
         recs, _ = hub.reader.rows("pad", 0, 1 << 62, (KIND_EVENT, None), limit=10**6)
         recorded = {r.seq: r.data for r in recs}

@@ -5,7 +5,6 @@ another hub's Things to that hub."""
 
 from __future__ import annotations
 
-import asyncio
 from typing import Any
 
 from wott_directory import Directory, DirectoryServer, DirectorySettings
@@ -17,10 +16,10 @@ from wott_hub.network import DirectoryConfig, DiscoveryConfig, Registration
 TOKEN = "t"
 
 
-def test_adopted_from_a_known_directory_and_lost_when_deleted_there(scene, wait_for):
+def test_adopted_from_a_known_directory_and_lost_when_deleted_there(press_scene, wait_for, run):
     async def scenario() -> Any:
         server = await DirectoryServer(Directory(DirectorySettings(token=TOKEN))).start()
-        a = Hub(HubConfig(name="a", http_port=0, ws_port=0, history=False, devices=(scene("pad"),),
+        a = Hub(HubConfig(name="a", http_port=0, ws_port=0, history=False, devices=(press_scene("pad"),),
                           directory=DirectoryConfig(register_to=(Registration(server.url, TOKEN),))))
         b = Hub(HubConfig(name="b", http_port=0, ws_port=0, history=False, directory=DirectoryConfig(
             enabled=False), discovery=DiscoveryConfig(mdns=False, browse=False, directories=(server.url,),
@@ -49,4 +48,4 @@ def test_adopted_from_a_known_directory_and_lost_when_deleted_there(scene, wait_
             await a.stop()
             await server.stop()
 
-    asyncio.run(asyncio.wait_for(scenario(), 60))
+    run(scenario(), 60)

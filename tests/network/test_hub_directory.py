@@ -8,7 +8,8 @@ import contextlib
 from typing import Any
 
 import httpx
-from wott_directory import DirectoryClient
+import pytest
+from wott_directory import DirectoryClient, ProblemError
 from wott_directory.validation import check_td
 
 from wott_hub import hub_replay
@@ -20,10 +21,6 @@ LAMP = {"@context": "https://www.w3.org/2022/wot/td/v1.1", "id": "urn:example:la
         "securityDefinitions": {"nosec_sc": {"scheme": "nosec"}}, "security": "nosec_sc"}
 
 
-def run(coro: Any, timeout: float = 60) -> Any:
-    return asyncio.run(asyncio.wait_for(coro, timeout))
-
-
 async def listing(hub: Hub) -> dict[str, dict[str, Any]]:
     await hub.network.drain()
     async with httpx.AsyncClient(timeout=10) as http:
@@ -32,12 +29,12 @@ async def listing(hub: Hub) -> dict[str, dict[str, Any]]:
     return {td["id"]: td for td in resp.json()}
 
 
-def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_path, scene):
+def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_path, press_scene, run):
     db = str(tmp_path / "hub.db")
 
     async def first_run() -> None:
         hub = Hub(HubConfig(name="lab", http_port=0, ws_port=0, database=db, history_batch_ms=10,
-                            devices=(scene("pad"), scene("cyl", "cylinder"))))
+                            devices=(press_scene("pad"), press_scene("cyl", "cylinder"))))
         await hub.start()
         client = DirectoryClient(f"{hub.http_url}/")
         try:
@@ -63,7 +60,7 @@ def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_p
                 ev = await stream.next(10)
                 assert (ev.type, ev.data) == ("thing_deleted", {"id": "urn:wott-hub:device:pad"})
                 assert "urn:wott-hub:device:pad" not in await listing(hub)
-                await hub.add_device(scene("pad2"))
+                await hub.add_device(press_scene("pad2"))
                 ev = await stream.next(10)
                 assert (ev.type, ev.data) == ("thing_created", {"id": "urn:wott-hub:device:pad2"})
                 out = await hub_replay.start_replay(hub, "cyl", speed=0)  # replay Things too
@@ -84,7 +81,7 @@ def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_p
         """Same database, a different fleet: the TDs of the previous run's Things are gone, the
         lamp (registered by someone else) is still there."""
         hub = Hub(HubConfig(name="lab", http_port=0, ws_port=0, database=db,
-                            devices=(scene("cyl", "cylinder"),)))
+                            devices=(press_scene("cyl", "cylinder"),)))
         await hub.start()
         try:
             tds = await listing(hub)
@@ -97,20 +94,19 @@ def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_p
     run(second_run())
 
 
-def test_writes_need_the_token_when_one_is_set_and_a_hub_without_history_keeps_it_in_memory(scene):
+def test_writes_need_the_token_when_one_is_set_and_a_hub_without_history_keeps_it_in_memory(press_scene,
+                                                                                              run):
     async def scenario() -> None:
-        hub = Hub(HubConfig(http_port=0, ws_port=0, history=False, devices=(scene("pad"),),
+        hub = Hub(HubConfig(http_port=0, ws_port=0, history=False, devices=(press_scene("pad"),),
                             directory=DirectoryConfig(token="s3cret")))
         await hub.start()
         anonymous = DirectoryClient(f"{hub.http_url}/")
         trusted = DirectoryClient(f"{hub.http_url}/", token="s3cret")
         try:
             assert hub.engine is None and "urn:wott-hub:device:pad" in await listing(hub)
-            try:
+            with pytest.raises(ProblemError) as refused:  # a write without the token is not accepted
                 await anonymous.put(LAMP)
-                raise AssertionError("a write without the token was accepted")
-            except Exception as e:
-                assert getattr(e, "status", None) == 401
+            assert refused.value.status == 401
             assert await trusted.put(LAMP) is True
             wk = await anonymous.directory_description()
             assert wk["actions"]["createThing"]["forms"][0]["security"] == ["bearer_sc"]
@@ -122,11 +118,12 @@ def test_writes_need_the_token_when_one_is_set_and_a_hub_without_history_keeps_i
     run(scenario())
 
 
-def test_a_directory_request_during_start_up_waits_for_the_directory(tmp_path, scene):
+def test_a_directory_request_during_start_up_waits_for_the_directory(tmp_path, press_scene, run):
     """The TDs are served before the database opens; /things asked meanwhile answers once the
     directory is there, with every Thing in it; a registration sent meanwhile is applied."""
     async def scenario() -> None:
-        hub = Hub(HubConfig(http_port=0, ws_port=0, database=str(tmp_path / "h.db"), devices=(scene("pad"),)))
+        hub = Hub(HubConfig(http_port=0, ws_port=0, database=str(tmp_path / "h.db"),
+                            devices=(press_scene("pad"),)))
         opened = asyncio.Event()
         real = hub._open_history
 

@@ -22,10 +22,6 @@ WOTT_HUB = Path(sys.executable).with_name("wott-hub")
 TOKEN = "fleet-t0ken"
 
 
-def run(coro: Any, timeout: float = 60) -> Any:
-    return asyncio.run(asyncio.wait_for(coro, timeout))
-
-
 async def fleet_directory() -> tuple[DirectoryServer, DirectoryClient]:
     server = await DirectoryServer(Directory(DirectorySettings(token=TOKEN, purge_interval=0.2))).start()
     return server, DirectoryClient(server.url)
@@ -35,11 +31,11 @@ async def hub_ids(client: DirectoryClient) -> dict[str, dict[str, Any]]:
     return {td["id"]: td for td in await client.list() if td["id"].startswith("urn:wott-hub:")}
 
 
-def test_registered_with_a_ttl_followed_and_deleted_on_a_clean_stop(tmp_path, scene):
+def test_registered_with_a_ttl_followed_and_deleted_on_a_clean_stop(tmp_path, press_scene, run):
     async def scenario() -> None:
         server, fleet = await fleet_directory()
         cfg = HubConfig(name="edge-1", http_port=0, ws_port=0, database=str(tmp_path / "hub.db"),
-                        devices=(scene("pad"), scene("cyl", "cylinder")),
+                        devices=(press_scene("pad"), press_scene("cyl", "cylinder")),
                         directory=DirectoryConfig(register_to=(Registration(server.url, TOKEN),), ttl_s=30))
         hub = Hub(cfg)
         await hub.start()
@@ -86,7 +82,7 @@ step = [{{ kind = "press", at = [11.25, 11.25, 4.0], start_s = 0.5, duration_s =
 """
 
 
-def test_the_things_of_a_hub_that_dies_expire(tmp_path, wait_for):
+def test_the_things_of_a_hub_that_dies_expire(tmp_path, wait_for, run):
     async def scenario() -> None:
         server, fleet = await fleet_directory()
         (tmp_path / "hub.toml").write_text(CONFIG.format(url=server.url, token=TOKEN))

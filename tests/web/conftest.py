@@ -7,18 +7,16 @@ twin nobody tested in a browser is not tested.
 
 from __future__ import annotations
 
-import asyncio
 import os
 import shutil
 import tempfile
-import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from wott_hub.config import HubConfig
-from wott_hub.hub import Hub, demo_devices
+from wott_hub.hub import demo_devices
 from wott_hub.network import DirectoryConfig
 
 CHROMIUM = os.environ.get("WOTT_CHROMIUM", "/usr/bin/chromium")
@@ -27,38 +25,6 @@ CHROMIUM_ARGS = [
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
     "--enable-unsafe-swiftshader",  # WebGL on the CPU (plotly's 3D) without a GPU
 ]
-
-
-class TwinHub:
-    """A hub on 127.0.0.1 (free ports) in its own thread. Its own TD directory is at ``/things``
-    (every Thing it serves is registered there as it is exposed, deleted as it is removed), so the
-    pages are tested against the W3C Discovery API; ``directory=False`` turns it off."""
-
-    def __init__(self, config: HubConfig) -> None:
-        self.hub = Hub(config)
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-
-    def start(self) -> TwinHub:
-        self.thread.start()
-        self.call(self.hub.start, timeout=60)
-        self.url = self.hub.http_url
-        return self
-
-    def call(self, fn, *args, timeout: float = 30, **kwargs):
-        """Run ``fn(*args, **kwargs)`` (a function or coroutine function) on the hub's loop."""
-        async def wrapper():
-            res = fn(*args, **kwargs)
-            if asyncio.iscoroutine(res):
-                res = await res
-            return res
-
-        return asyncio.run_coroutine_threadsafe(wrapper(), self.loop).result(timeout)
-
-    def stop(self) -> None:
-        self.call(self.hub.stop, timeout=60)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(10)
 
 
 def barrel_scene(device_id: str = "barrel", *, loop: bool = True, steps: list[dict] | None = None):
@@ -87,32 +53,35 @@ def barrel_scene(device_id: str = "barrel", *, loop: bool = True, steps: list[di
                                              "loop": loop, "rate_hz": 120.0, "step": steps})
 
 
-def start_hub(db: Path, devices, *, directory: bool = True) -> TwinHub:
-    cfg = HubConfig(http_port=0, ws_port=0, database=str(db), ring_size=20_000, history_batch_ms=20,
-                    devices=tuple(devices), directory=DirectoryConfig(enabled=directory))
-    return TwinHub(cfg).start()
+@pytest.fixture(scope="package")
+def hub_runner(hub_thread):
+    """start_hub(db, devices, directory=True) -> a started HubThread (tests/conftest.py) with history.
+    Its own TD directory is at ``/things`` (every Thing it serves is registered there as it is exposed,
+    deleted as it is removed), so the pages are tested against the W3C Discovery API;
+    ``directory=False`` turns it off."""
+
+    def start_hub(db: Path, devices, *, directory: bool = True):
+        cfg = HubConfig(http_port=0, ws_port=0, database=str(db), ring_size=20_000, history_batch_ms=20,
+                        devices=tuple(devices), directory=DirectoryConfig(enabled=directory))
+        return hub_thread(cfg).start()
+
+    return start_hub
 
 
 @pytest.fixture(scope="package")
-def twin(tmp_path_factory):
+def twin(tmp_path_factory, hub_runner):
     """A hub with one busy scene barrel, history on, a directory at /things."""
-    hub = start_hub(tmp_path_factory.mktemp("twin") / "hub.db", [barrel_scene("barrel")])
+    hub = hub_runner(tmp_path_factory.mktemp("twin") / "hub.db", [barrel_scene("barrel")])
     yield hub
     hub.stop()
 
 
 @pytest.fixture(scope="module")
-def fleet(tmp_path_factory):
+def fleet(tmp_path_factory, hub_runner):
     """The demo fleet (each installed plugin's simulated devices) and the scene barrel."""
-    hub = start_hub(tmp_path_factory.mktemp("fleet") / "hub.db", [*demo_devices(), barrel_scene("barrel")])
+    hub = hub_runner(tmp_path_factory.mktemp("fleet") / "hub.db", [*demo_devices(), barrel_scene("barrel")])
     yield hub
     hub.stop()
-
-
-@pytest.fixture(scope="package")
-def hub_runner():
-    """start_hub(db, devices, directory=...) for tests needing a hub of their own."""
-    return start_hub
 
 
 @pytest.fixture(scope="package")

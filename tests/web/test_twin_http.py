@@ -8,7 +8,6 @@ from importlib import resources
 
 import httpx
 import pytest
-from httpx_sse import connect_sse
 
 from wott_hub.td.validate import validate_td
 
@@ -53,7 +52,7 @@ def test_hub_thing_declares_replay_actions_with_post_forms(twin, http):
     assert td["actions"]["replay"]["input"]["required"] == ["device"]
 
 
-def test_replay_action_replays_history_as_a_thing_and_stop_removes_it(twin, http):
+def test_replay_action_replays_history_as_a_thing_and_stop_removes_it(twin, http, sse_events):
     td = http.get("/wot/hub").json()
     replay = td["actions"]["replay"]["forms"][0]["href"]
     stop = td["actions"]["stopReplay"]["forms"][0]["href"]
@@ -67,13 +66,8 @@ def test_replay_action_replays_history_as_a_thing_and_stop_removes_it(twin, http
     out = r.json()
     assert out["thing"] == "replay-barrel" and out["from"] > 0 and out["speed"] == 0
     events = f"{out['td']}/events/skinDeformedDetection"
-    got = []
-    with httpx.Client(timeout=20) as c, connect_sse(c, "GET", events,
-                                                    headers={"Last-Event-ID": str(out["after"])}) as es:
-        for ev in es.iter_sse():
-            got.append(json.loads(ev.data))
-            if len(got) >= 5:
-                break
+    got = [json.loads(ev.data)
+           for ev in sse_events(events, 5, headers={"Last-Event-ID": str(out["after"])}, timeout=20)]
     assert all(p["numOfDeformedNodes"] == len(p["arrayOfDeformedNodes"]) for p in got)
     assert got[0]["timeStamp"] >= out["from"]  # recorded packets, unchanged
     assert "replay-barrel" in {d["id"] for d in http.get("/wot/hub/properties/devices").json()}

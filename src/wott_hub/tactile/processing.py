@@ -8,6 +8,7 @@ frame with no node above ε costs one norm over the free nodes.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,7 +17,10 @@ from .contacts import Contact, WinklerForceModel, find_contacts
 from .frame import FrameError, TactileFrame
 from .mesh import SkinMesh
 
-__all__ = ["FrameProcessor", "FrameResult", "ProcessingParams"]
+if TYPE_CHECKING:
+    from .device import DeviceDescription
+
+__all__ = ["FrameProcessor", "FrameResult", "ProcessingParams", "processing_params"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -32,6 +36,12 @@ class ProcessingParams:
     # "winkler": independent springs under each node (cheap); "stiffness": the Kelvin-Voigt skin's
     # assembled stiffness (wott_hub.tactile.mechanics), exact for quasi-static presses
     force_model: str = "winkler"
+
+
+def processing_params(desc: DeviceDescription) -> ProcessingParams:
+    """Processing settings from what the device says about itself."""
+    return ProcessingParams(epsilon_mm=desc.epsilon_mm, modulus_mpa=desc.material.modulus_mpa,
+                            thickness_mm=desc.thickness_mm)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
