@@ -87,13 +87,31 @@ class ServerThread:
         self._thread.join(20)
 
 
+ENGINE_MODULES = {"test_things_api.py", "test_search.py", "test_events.py", "test_expiry_and_storage.py"}
+"""Modules whose directories run on SQLite and on PostgreSQL (the session's throw-away cluster,
+tests/postgres.py, registered by the root conftest.py); the others on SQLite only."""
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    if "directory_db" in metafunc.fixturenames and metafunc.definition.path.name in ENGINE_MODULES:
+        metafunc.parametrize("directory_db", ["sqlite", "postgresql"], indirect=True)
+
+
 @pytest.fixture
-def start_directory() -> Iterator[Callable[..., ServerThread]]:
+def directory_db(request: pytest.FixtureRequest) -> str:
+    """The database URL a test's directories use: in-memory SQLite, or a fresh PostgreSQL database."""
+    if getattr(request, "param", "sqlite") == "postgresql":
+        return str(request.getfixturevalue("pg_url"))
+    return "sqlite://"
+
+
+@pytest.fixture
+def start_directory(directory_db: str) -> Iterator[Callable[..., ServerThread]]:
     started: list[ServerThread] = []
 
-    def start(db: str = "sqlite://", **settings: Any) -> ServerThread:
+    def start(db: str | None = None, **settings: Any) -> ServerThread:
         settings.setdefault("token", TOKEN)
-        srv = ServerThread(DirectorySettings(**settings), db).start()
+        srv = ServerThread(DirectorySettings(**settings), db or directory_db).start()
         started.append(srv)
         return srv
 

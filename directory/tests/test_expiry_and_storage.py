@@ -61,8 +61,8 @@ def test_absolute_expires_without_ttl(http, helpers):
     assert http.put("/things/urn:example:bad", json=bad, headers=helpers.td_headers()).status_code == 400
 
 
-def test_storage_survives_a_restart(start_directory, helpers, tmp_path, listener_cls):
-    db = f"sqlite:///{tmp_path / 'tdd.db'}"
+def test_storage_survives_a_restart(start_directory, helpers, tmp_path, listener_cls, directory_db):
+    db = directory_db if directory_db.startswith("postgresql") else f"sqlite:///{tmp_path / 'tdd.db'}"
     first = start_directory(db=db)
     auth = {"Authorization": f"Bearer {helpers.token}"}
     with httpx.Client(base_url=first.url, headers=auth) as c:

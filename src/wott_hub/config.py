@@ -1,52 +1,110 @@
 """The hub's configuration file (TOML): a ``[hub]`` table and ``[[device]]`` tables.
 
-See docs/hub.md and the commented example docs/hub.example.toml. Every key is
-checked here, so a typo is an error naming the file, table and key, not a
-setting silently ignored. ``[[device]]`` tables become
-``wott_hub.plugins.DeviceConfig`` (``id`` and ``family``; every other key is a
-setting of the device's family, checked by its plugin when the device opens).
+See docs/hub.md, the commented example docs/hub.example.toml and the generated
+reference docs/configuration.md. Every key is declared once below (type with
+bounds, default, description) and read by ``wott_hub.configspec`` (msgspec), so
+a typo or a value out of bounds is a ``ConfigError`` naming the file, table and
+key, not a setting silently ignored or a worker fork bomb. ``[[device]]`` tables
+become ``wott_hub.plugins.DeviceConfig`` (``id`` and ``family``; every other key
+is a setting of the device's family, checked by its plugin when the device opens).
 """
 
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from wott_hub.network.config import DirectoryConfig, DiscoveryConfig, parse_directory, parse_discovery
+from wott_hub.configspec import ConfigError, check, doc, json_schema, read, says, table_of
+from wott_hub.mqtt.config import MQTT_TABLE, MqttConfig, parse_mqtt
+from wott_hub.network.config import (
+    DIRECTORY_TABLE,
+    DISCOVERY_TABLE,
+    DirectoryConfig,
+    DiscoveryConfig,
+    parse_directory,
+    parse_discovery,
+)
+from wott_hub.security.config import SECURITY_TABLE, SecurityConfig, parse_security
 
-__all__ = ["ConfigError", "HubConfig"]
+if TYPE_CHECKING:
+    from wott_hub.history.retention import Retention
 
+__all__ = ["HUB_TABLE", "MAX_WORKERS", "ConfigError", "HubConfig", "check_port", "config_schema"]
 
-class ConfigError(ValueError):
-    """A config file that cannot be used, with the file, table and key at fault."""
+MAX_WORKERS = 64
+"""Worker processes at most: beyond a few per core they only add memory and context switches."""
+
+Text = Annotated[str, says("a non-empty string", pattern=r"\S")]
+Flag = Annotated[bool, says("true or false")]
+Port = Annotated[int, says("a port number (0: any free port)", ge=0, le=65535)]
+Days = Annotated[float, says("a positive number", gt=0, le=36_500)]
+Megabytes = Annotated[float, says("a positive number", gt=0, le=1e9)]
+BatchMs = Annotated[float, says("a positive number of milliseconds", gt=0, le=60_000)]
+Seconds = Annotated[float, says("a positive number of seconds", gt=0, le=3_600)]
+Workers = Annotated[int, says("a whole number of processes (0: none)", ge=0, le=MAX_WORKERS)]
+DeviceIds = Annotated[tuple[Annotated[str, says("a device id")], ...], says("a list of device ids")]
+BatchMax = Annotated[int, says("a positive integer", ge=1, le=1_000_000)]
+RingSize = Annotated[int, says("a positive integer", ge=1, le=10_000_000)]
+MaxPending = Annotated[int, says("a positive integer", ge=1, le=100_000_000)]
+HubId = Annotated[str, says("a hub id: lower-case letters, digits and '-', at most 32",
+                            pattern=r"^[a-z0-9]([a-z0-9-]{0,30}[a-z0-9])?$")]
+Durability = Literal["fast", "committed"]
 
 
 @dataclass(frozen=True)
 class HubConfig:
-    name: str = "wott-hub"
-    host: str = "127.0.0.1"
-    public_host: str | None = None  # host name written into TD forms; default: host
-    http_port: int = 8080
-    ws_port: int | None = 8081  # wotpy's WebSocket JSON-RPC binding; None: off
-    catalogue_port: int = 0  # wotpy's separate TD catalogue port; 0: off (the catalogue is at /wot)
-    history: bool = True
-    database: str = "wott-hub.db"  # a file path (SQLite) or an SQLAlchemy URL
-    retention_days: float | None = None
-    retention_mb: float | None = None
-    history_batch_ms: float = 50.0
-    history_batch_max: int = 20_000
-    history_skip: tuple[str, ...] = ()  # device ids whose events are not recorded
-    ring_size: int = 4096  # records per Thing kept in memory for SSE resume
-    max_pending: int = 100_000  # records a subscriber may fall behind before it is cut off
-    heartbeat_s: float = 15.0
-    workers: int = 0  # processes running the devices' drivers and processing; 0: in the hub's process
+    name: Text = field(default="wott-hub", metadata=doc("The hub Thing's title."))
+    id: HubId | None = field(default=None, metadata=doc(
+        "The hub's id, in every Thing id it serves (urn:wott-hub:<id>:device:<device>) and its "
+        "mDNS names; default: generated once and kept beside the database (docs/scale-out.md)."))
+    host: Text = field(default="127.0.0.1", metadata=doc(
+        "Address to listen on (0.0.0.0 for every interface)."))
+    public_host: Text | None = field(default=None, metadata=doc(
+        "Host name written into TD forms; default: host (127.0.0.1 for 0.0.0.0)."))
+    http_port: Port = field(default=8080, metadata=doc(
+        "TDs, properties, SSE streams, the Tactile JSON-LD context; 0: any free port."))
+    ws_port: Port | None = field(default=8081, metadata=doc(
+        "wotpy's WebSocket JSON-RPC binding; false: off."))
+    catalogue_port: Port = field(default=0, metadata=doc(
+        "wotpy's separate TD catalogue port; 0: off (the catalogue is at /wot)."))
+    history: Flag = field(default=True, metadata=doc("Record every event and property change."))
+    database: Text = field(default="wott-hub.db", metadata=doc(
+        "History database: a SQLite file (relative to the config file) or an SQLAlchemy URL."))
+    retention_days: Days | None = field(default=None, metadata=doc(
+        "Delete events older than this many days; default: keep them."))
+    retention_mb: Megabytes | None = field(default=None, metadata=doc(
+        "Keep the history under this many MB (oldest deleted first); default: no limit."))
+    history_batch_ms: BatchMs = field(default=50.0, metadata=doc(
+        "The history writer commits at most this often (one transaction per batch), ms."))
+    history_batch_max: BatchMax = field(default=20_000, metadata=doc(
+        "... or as soon as this many records wait."))
+    history_durability: Durability = field(default="fast", metadata=doc(
+        "fast: subscribers get a record as soon as it is made, before its batch commits (a crash "
+        "can lose what they saw); committed: only once it is in history (docs/reliability.md)."))
+    history_skip: DeviceIds = field(default=(), metadata=doc(
+        "Device ids whose events are served live but not recorded."))
+    ring_size: RingSize = field(default=4096, metadata=doc(
+        "Records per Thing kept in memory for SSE resume."))
+    max_pending: MaxPending = field(default=100_000, metadata=doc(
+        "Records a subscriber may fall behind before it is cut off (it resumes with Last-Event-ID)."))
+    heartbeat_s: Seconds = field(default=15.0, metadata=doc(
+        "SSE comment on idle streams, s (keeps proxies from closing them)."))
+    workers: Workers = field(default=0, metadata=doc(
+        f"Processes running the devices' drivers and processing (0: in the hub's process; "
+        f"at most {MAX_WORKERS})."))
     devices: tuple[Any, ...] = field(default_factory=tuple)  # wott_hub.plugins.DeviceConfig
     directory: DirectoryConfig = field(default_factory=DirectoryConfig)  # [directory]: on by default
     discovery: DiscoveryConfig = field(default_factory=DiscoveryConfig.off)  # [discovery]: files turn mDNS on
+    mqtt: MqttConfig = field(default_factory=MqttConfig)  # [mqtt]: off unless url is set
+    security: SecurityConfig = field(default_factory=SecurityConfig)  # [security]: docs/security.md
     demo: bool = False  # no [[device]]: run the demo scene
     source: str = "<defaults>"
+
+    def __post_init__(self) -> None:
+        # built in Python or changed by dataclasses.replace (CLI options): the same bounds as a file
+        check(self, HUB_TABLE, f"{self.source}: [hub]")
 
     @classmethod
     def demo_config(cls, **overrides: Any) -> HubConfig:
@@ -60,41 +118,37 @@ class HubConfig:
             data = tomllib.loads(path.read_text())
         except OSError as e:
             raise ConfigError(f"{path}: cannot read: {e.strerror or e}") from None
-        except tomllib.TOMLDecodeError as e:
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise ConfigError(f"{path}: not valid TOML: {e}") from None
         cfg = cls.from_dict(data, source=str(path))
         db = cfg.database
         if "://" not in db and not Path(db).is_absolute():  # relative to the config file
             cfg = _replace(cfg, database=str((path.parent / db).resolve()))
-        return cfg
+        return _replace(cfg, security=cfg.security.resolved(path.parent))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<config>") -> HubConfig:
-        unknown = set(data) - {"hub", "device", "directory", "discovery"}
+        unknown = set(data) - {"hub", "device", "directory", "discovery", "mqtt", "security"}
         if unknown:
             raise ConfigError(f"{source}: unknown table(s) {sorted(unknown)}; expected [hub], [[device]], "
-                              "[directory] and [discovery]")
+                              "[directory], [discovery], [mqtt] and [security]")
         hub = data.get("hub", {})
-        if not isinstance(hub, dict):
-            raise ConfigError(f"{source}: [hub] must be a table")
-        known = {f.name for f in fields(cls)} - {"devices", "demo", "source", "directory", "discovery"}
-        values: dict[str, Any] = {}
-        for key, value in hub.items():
-            if key not in known:
-                raise ConfigError(f"{source}: [hub].{key}: unknown key (known: {', '.join(sorted(known))})")
-            values[key] = _check(key, value, f"{source}: [hub].{key}")
+        if isinstance(hub, dict) and hub.get("ws_port") is False:  # documented spelling of "off"
+            hub = {**hub, "ws_port": None}
+        table = read(HUB_TABLE, hub, f"{source}: [hub]")
+        values = {k: getattr(table, k) for k in hub if k in HUB_TABLE.__struct_fields__}
         devices = data.get("device", [])
         if not isinstance(devices, list):
             raise ConfigError(f"{source}: 'device' must be an array of tables ([[device]])")
-        from wott_hub.drivers.base import DriverError
+        from wott_hub.errors import DriverError
         from wott_hub.plugins import DeviceConfig
 
         parsed = []
         ids: set[str] = set()
-        for i, table in enumerate(devices):
+        for i, dev in enumerate(devices):
             where = f"{source}: device[{i}]"
             try:
-                cfg = DeviceConfig.from_table(table, where=where)
+                cfg = DeviceConfig.from_table(dev, where=where)
             except DriverError as e:
                 raise ConfigError(str(e)) from None
             if cfg.id in ids:
@@ -108,13 +162,20 @@ class HubConfig:
             raise ConfigError(f"{source}: [hub].history_skip names unknown device(s) {sorted(skip - ids)}")
         return cls(devices=tuple(parsed), demo=not parsed, source=source,
                    directory=parse_directory(data.get("directory", {}), source),
-                   discovery=parse_discovery(data.get("discovery", {}), source), **values)
+                   discovery=parse_discovery(data.get("discovery", {}), source),
+                   mqtt=parse_mqtt(data.get("mqtt", {}), source),
+                   security=parse_security(data.get("security", {}), source), **values)
 
     @property
-    def retention(self):
+    def retention(self) -> Retention:
         from wott_hub.history.retention import Retention
 
         return Retention(days=self.retention_days, max_mb=self.retention_mb)
+
+
+HUB_TABLE = table_of(HubConfig, "hub", exclude=("devices", "directory", "discovery", "mqtt", "security",
+                                                "demo", "source"))
+"""The ``[hub]`` table as it is written in a file (JSON Schema: ``config_schema``)."""
 
 
 def _replace(cfg: HubConfig, **changes: Any) -> HubConfig:
@@ -123,42 +184,32 @@ def _replace(cfg: HubConfig, **changes: Any) -> HubConfig:
     return replace(cfg, **changes)
 
 
-_PORTS = ("http_port", "ws_port", "catalogue_port")
-_POSITIVE = ("retention_days", "retention_mb", "history_batch_ms", "heartbeat_s")
-_COUNTS = ("history_batch_max", "ring_size", "max_pending")
-_NATURALS = ("workers",)
-_STRINGS = ("name", "host", "public_host", "database")
+def check_port(value: int | None, option: str = "--port") -> int | None:
+    """A port given on the command line, checked as ``[hub]`` ports are: ``--port 70000`` is a
+    ConfigError naming the option (the socket would otherwise wrap it to 4464)."""
+    if value is not None and (isinstance(value, bool) or not 0 <= value <= 65535):
+        raise ConfigError(f"{option}: a port number (0: any free port), got {value!r}; "
+                          "must be from 0 to 65535")
+    return value
 
 
-def _check(key: str, value: Any, where: str) -> Any:
-    if key in _PORTS:
-        if key == "ws_port" and value is False:
-            return None
-        if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 65535:
-            raise ConfigError(f"{where}: a port number 0-65535 (0: any free port), got {value!r}")
-        return value
-    if key in _POSITIVE:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
-            raise ConfigError(f"{where}: a positive number, got {value!r}")
-        return float(value)
-    if key in _COUNTS:
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ConfigError(f"{where}: a positive integer, got {value!r}")
-        return value
-    if key in _NATURALS:
-        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-            raise ConfigError(f"{where}: a whole number >= 0, got {value!r}")
-        return value
-    if key in _STRINGS:
-        if not isinstance(value, str) or not value.strip():
-            raise ConfigError(f"{where}: a non-empty string, got {value!r}")
-        return value
-    if key == "history":
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where}: true or false, got {value!r}")
-        return value
-    if key == "history_skip":
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise ConfigError(f"{where}: a list of device ids, got {value!r}")
-        return tuple(value)
-    raise ConfigError(f"{where}: unknown key")
+def config_schema() -> dict[str, Any]:
+    """The JSON Schema of a whole hub config file: ``[hub]``, ``[directory]``, ``[discovery]`` and
+    ``[[device]]`` (whose other keys are the family's settings: ``wott-hub plugins families``)."""
+    device = {"type": "object", "required": ["id", "family"], "additionalProperties": True,
+              "properties": {"id": {"type": "string", "minLength": 1,
+                                    "description": "Unique device id (not 'hub')."},
+                             "family": {"type": "string", "minLength": 1,
+                                        "description": "The device family (a plugin's)."}},
+              "description": "A device: id, family, and the family's settings."}
+    defs: dict[str, Any] = {}
+    props: dict[str, Any] = {}
+    for key, model in (("hub", HUB_TABLE), ("directory", DIRECTORY_TABLE), ("discovery", DISCOVERY_TABLE),
+                       ("mqtt", MQTT_TABLE), ("security", SECURITY_TABLE)):
+        schema = json_schema(model)
+        defs.update(schema.get("$defs", {}))
+        props[key] = {"$ref": schema["$ref"]} if "$ref" in schema else schema
+    props["device"] = {"type": "array", "items": device}
+    defs["hub"]["properties"]["ws_port"]["anyOf"].append({"const": False})  # the file's spelling of "off"
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "wott-hub configuration",
+            "type": "object", "properties": props, "additionalProperties": False, "$defs": defs}

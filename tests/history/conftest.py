@@ -8,9 +8,18 @@ from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
 from wott_hub.history import HistoryReader, HistoryWriter, create_engine, database_url, upgrade
 
 
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database(request, tmp_path):
+    """The history database of a test: an SQLite file, then a fresh PostgreSQL database (the
+    session's throw-away cluster, tests/postgres.py): the same models and migrations on both."""
+    if request.param == "postgresql":
+        return request.getfixturevalue("pg_url")
+    return database_url(tmp_path / "history.db")
+
+
 @pytest.fixture
-def engine(tmp_path):
-    eng = create_engine(database_url(tmp_path / "history.db"))
+def engine(database):
+    eng = create_engine(database)
     upgrade(eng)
     yield eng
     eng.dispose()

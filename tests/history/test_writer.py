@@ -122,3 +122,25 @@ def test_retention_by_size_keeps_the_newest_data_under_the_limit(writer, reader,
     seqs = [row[0] for p in reader.pages("d") for row in p]
     assert seqs and seqs[-1] == recs[-1].seq  # the newest survive
     assert seqs == list(range(seqs[0], recs[-1].seq + 1))  # a contiguous newest range
+
+
+def test_a_refused_row_is_isolated_and_the_rest_written_on_either_engine(writer, reader, engine,
+                                                                        make_records):
+    """PostgreSQL writes batches with COPY: one refused row fails the COPY, and the batch is
+    halved down to it exactly as an INSERT's would be."""
+    from wott_hub.history import EventRow
+
+    start = writer.register_thing("d")
+    recs = make_records("d", start, 100)
+    with engine.begin() as conn:  # seq 50 is already there (a second writer of the same Thing)
+        conn.execute(EventRow.__table__.insert().values(thing_key=writer.keys["d"], seq=recs[49].seq,
+                                                        t_ns=recs[49].t_ns, kind=0, name="other", data=b"{}"))
+    writer.start()
+    for r in recs:
+        writer.submit(r)
+    assert writer.flush()
+    assert (writer.written, writer.failed_records) == (99, 1)
+    assert "seq 50 not recorded" in writer.last_error
+    rows = {row[0]: row for page in reader.pages("d") for row in page}
+    assert sorted(rows) == [r.seq for r in recs]
+    assert rows[50][3] == "other" and all(rows[r.seq][4] == r.data for r in recs if r.seq != 50)

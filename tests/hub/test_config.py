@@ -56,3 +56,28 @@ def test_unreadable_and_invalid_files(tmp_path):
     bad.write_text("[hub\n")
     with pytest.raises(ConfigError, match="not valid TOML"):
         HubConfig.load(bad)
+
+
+@pytest.mark.parametrize(("doc", "message"), [
+    ({"hub": {"workers": 100000}},
+     "hub.toml: [hub].workers: a whole number of processes (0: none), got 100000; must be from 0 to 64"),
+    ({"hub": {"history_batch_ms": float("nan")}}, "hub.toml: [hub].history_batch_ms: a positive number of "
+                                                  "milliseconds, got nan; must be above 0 and at most 60000"),
+    ({"hub": {"retention_mb": float("inf")}}, "hub.toml: [hub].retention_mb: a positive number, got inf; "
+                                              "must be above 0 and at most 1000000000"),
+    ({"hub": {"ws_port": True}}, "hub.toml: [hub].ws_port: a port number (0: any free port), got True; "
+                                 "must be from 0 to 65535"),
+    ({"hub": {"name": " "}}, "hub.toml: [hub].name: a non-empty string, got ' '"),
+    ({"hub": {"history_skip": ["a", 1]}}, "hub.toml: [hub].history_skip[1]: a device id, got 1"),
+    ({"hub": []}, "hub.toml: [hub] must be a table, got []"),
+])
+def test_bounds_and_types_are_reported_in_one_line_with_their_place(doc, message):
+    with pytest.raises(ConfigError) as e:
+        HubConfig.from_dict(doc, source="hub.toml")
+    assert str(e.value) == message
+
+
+def test_the_config_error_is_the_hubs_one():
+    from wott_hub import errors
+
+    assert ConfigError is errors.ConfigError and errors.exit_code(ConfigError("x")) == 2

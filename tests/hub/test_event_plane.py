@@ -162,20 +162,18 @@ def test_the_hub_writes_skin_deformed_packets_exactly_as_the_processor_describes
 
 
 def test_frame_records_builds_only_what_is_wanted_and_the_worker_builds_everything():
-    """The same rules in the hub (asks the plane) and in a worker (wants everything), pump.py."""
+    """The same rules in the hub (asks the plane) and in a worker (wants everything), hub/pipeline.py."""
     import json
 
     import numpy as np
 
     from wott_hub.examples import example_device
-    from wott_hub.pump import ACTION, CONTACTS, SKIN_DEFORMED, frame_records, skin_deformed_json
+    from wott_hub.hub.pipeline import ACTION, CONTACTS, SKIN_DEFORMED, DevicePipeline, skin_deformed_json
     from wott_hub.tactile import FrameProcessor, TactileFrame
     from wott_hub.tactile.indentation import Indenter, indent
 
-    class State:
-        _had_contacts = False
-        _contacts = None
-        _contacts_json = None
+    def State():
+        return DevicePipeline("p", None, None, contacts_json=None)
 
     desc = example_device("flat")
     proc = FrameProcessor(desc.mesh)
@@ -193,19 +191,19 @@ def test_frame_records_builds_only_what_is_wanted_and_the_worker_builds_everythi
         return False
 
     for res in results:
-        frame_records(all_state, "p", res, 0, lambda *_: True, lambda *rec: everything.append(rec))
+        all_state.records(res, 0, lambda *_: True, lambda *rec: everything.append(rec))
         everything.append("frame end")
-        frame_records(none_state, "p", res, 0, never, lambda *rec: nothing.append(rec))
+        none_state.records(res, 0, never, lambda *rec: nothing.append(rec))
     by_frame = [[]]
     for rec in everything:
         if rec == "frame end":
             by_frame.append([])
         else:
             by_frame[-1].append(rec)
-    assert nothing == [] and none_state._contacts_json is None and none_state._contacts is results[-2]
+    assert nothing == [] and none_state.contacts_json is None and none_state.contacts is results[-2]
     # contacts while touched and once at rest; never again at rest
     assert [any(rec[2] == CONTACTS for rec in recs) for recs in by_frame[:4]] == [True, True, True, False]
-    assert all_state._contacts_json == json.dumps(results[2].contact_information(), separators=(",", ":"))
+    assert all_state.contacts_json == json.dumps(results[2].contact_information(), separators=(",", ":"))
     for res, recs in zip(results, by_frame, strict=False):
         assert all(rec[0] == "p" and rec[3] == res.t_ns and rec[5] is None for rec in recs)
         assert [rec[4] for rec in recs if rec[2] == SKIN_DEFORMED] == ([skin_deformed_json(res)]
@@ -220,19 +218,16 @@ def test_frame_records_stamps_the_skin_packet_when_tracing():
     import numpy as np
 
     from wott_hub.examples import example_device
-    from wott_hub.pump import SKIN_DEFORMED, frame_records
+    from wott_hub.hub.pipeline import SKIN_DEFORMED, DevicePipeline
     from wott_hub.tactile import FrameProcessor, TactileFrame
     from wott_hub.tactile.indentation import Indenter, indent
-
-    class State:
-        _had_contacts = False
 
     desc = example_device("flat")
     centre = desc.mesh.nodes[desc.mesh.free_indices[100]]
     d = indent(desc.mesh, [Indenter(centre, 1.3, 5.0, np.array([0.0, 0.0, 0.0]))])
     res = FrameProcessor(desc.mesh).process(TactileFrame(1, d))
     out = []
-    frame_records(State(), "p", res, 123, lambda *_: True, lambda *rec: out.append(rec))
+    DevicePipeline("p", None, None).records(res, 123, lambda *_: True, lambda *rec: out.append(rec))
     traces = {rec[2]: rec[5] for rec in out}
     assert set(traces[SKIN_DEFORMED]) == {"in", "proc", "enc"} and traces[SKIN_DEFORMED]["in"] == 123
     assert all(trace is None for name, trace in traces.items() if name != SKIN_DEFORMED)

@@ -33,10 +33,10 @@ def test_adopted_from_a_known_directory_and_lost_when_deleted_there(press_scene,
         try:
             await wait_for(lambda: "pad" in b.devices and b.devices["pad"].health_state()[0] == "ok",
                            what="b adopts a's pad")
-            assert b.network.discovery.adopted == {"urn:wott-hub:device:pad": "pad"}
+            assert b.network.discovery.adopted == {a.identity.device_id("pad"): "pad"}
             assert b.devices["pad"].family == "wot-remote"
             assert b.devices["pad"].driver.td["base"] == f"{a.http_url}/"
-            assert "urn:wott-hub:hub:a" in b.network.discovery.unclaimed  # found, not tactile: not adopted
+            assert a.identity.hub_thing_id in b.network.discovery.unclaimed  # found, not tactile: not adopted
             assert shy.devices == {} and shy.network.discovery.unclaimed == {}  # another hub's Things
 
             await a.remove_device("pad")  # deleted from the fleet directory: b's copy is disconnected

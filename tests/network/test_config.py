@@ -57,3 +57,28 @@ def test_the_example_config_file_loads():
 
     cfg = HubConfig.load(Path(__file__).resolve().parents[2] / "docs" / "hub.example.toml")
     assert cfg.directory.enabled and cfg.discovery.mdns
+
+
+@pytest.mark.parametrize(("data", "message"), [
+    ({"directory": {"ttl_s": 1e20}}, "[directory].ttl_s: a positive number of seconds, got 1e+20; "
+                                     "must be from 1 to 86400"),
+    ({"directory": {"ttl_s": float("nan")}}, "[directory].ttl_s: a positive number of seconds, got nan; "
+                                             "must be from 1 to 86400"),
+    ({"directory": {"register_to": [5]}}, "[directory].register_to[0]: an http(s) URL or a table "
+                                          "{ url, token }, got 5"),
+    ({"directory": {"register_to": [{"token": "t"}]}}, "[directory].register_to[0].url: required, missing"),
+    ({"directory": {"register_to": [{"url": "http://x/", "token": ""}]}},
+     "[directory].register_to[0].token: a non-empty string, got ''"),
+    ({"discovery": {"interfaces": [""]}}, "[discovery].interfaces[0]: an interface address, got ''"),
+    ({"directory": 3}, "[directory] must be a table, got 3"),
+])
+def test_every_error_is_one_line_naming_file_table_and_key(data, message):
+    with pytest.raises(ConfigError) as e:
+        HubConfig.from_dict(data, source="hub.toml")
+    assert str(e.value) == f"hub.toml: {message}"
+
+
+def test_ttl_bounds_hold_in_python_too():
+    assert DirectoryConfig(ttl_s=1).ttl_s == 1 and DirectoryConfig(ttl_s=86_400).ttl_s == 86_400
+    with pytest.raises(ConfigError, match=r"\[directory\]\.ttl_s: .* got 0\.5; must be from 1 to 86400"):
+        DirectoryConfig(ttl_s=0.5)

@@ -38,18 +38,19 @@ def test_registered_with_a_ttl_followed_and_deleted_on_a_clean_stop(tmp_path, pr
                         devices=(press_scene("pad"), press_scene("cyl", "cylinder")),
                         directory=DirectoryConfig(register_to=(Registration(server.url, TOKEN),), ttl_s=30))
         hub = Hub(cfg)
+        ids = hub.identity  # every Thing id carries the hub's id (docs/scale-out.md)
         await hub.start()
         try:
             await hub.network.drain()
             tds = await hub_ids(fleet)
-            assert set(tds) == {"urn:wott-hub:device:pad", "urn:wott-hub:device:cyl",
-                                "urn:wott-hub:hub:edge-1"}
-            reg = tds["urn:wott-hub:device:pad"]["registration"]
+            assert set(tds) == {ids.device_id("pad"), ids.device_id("cyl"),
+                                ids.hub_thing_id}
+            reg = tds[ids.device_id("pad")]["registration"]
             assert reg["ttl"] == 30 and "expires" in reg
-            assert tds["urn:wott-hub:device:pad"]["forms"] == hub.server.things.get("pad").td["forms"]
+            assert tds[ids.device_id("pad")]["forms"] == hub.server.things.get("pad").td["forms"]
             await hub.remove_device("cyl")
             await hub.network.drain()
-            assert set(await hub_ids(fleet)) == {"urn:wott-hub:device:pad", "urn:wott-hub:hub:edge-1"}
+            assert set(await hub_ids(fleet)) == {ids.device_id("pad"), ids.hub_thing_id}
         finally:
             await hub.stop()
         assert await hub_ids(fleet) == {}  # a clean stop: they are gone now, not in 30 s
@@ -95,15 +96,16 @@ def test_the_things_of_a_hub_that_dies_expire(tmp_path, wait_for, run):
             assert line, (await proc.stderr.read()).decode()
             info = json.loads(line)
             assert info["registered_to"] == [server.url] and info["directory"] == info["http"] + "/"
+            pad, hub_thing = f"urn:wott-hub:{info['hub_id']}:device:pad", f"urn:wott-hub:{info['hub_id']}:hub"
 
             async def registered() -> bool:
-                return set(await hub_ids(fleet)) == {"urn:wott-hub:device:pad", "urn:wott-hub:hub:edge-2"}
+                return set(await hub_ids(fleet)) == {pad, hub_thing}
 
             await wait_for(registered, what="registered")
-            first = (await fleet.get("urn:wott-hub:device:pad"))["registration"]
+            first = (await fleet.get(pad))["registration"]
             await asyncio.sleep(2.0)  # longer than the ttl: still there, because the hub refreshes
             assert await registered()
-            again = (await fleet.get("urn:wott-hub:device:pad"))["registration"]
+            again = (await fleet.get(pad))["registration"]
             assert again["expires"] > first["expires"] and again["modified"] == first["modified"]
 
             proc.send_signal(signal.SIGKILL)  # dies without unregistering anything

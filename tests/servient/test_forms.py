@@ -42,16 +42,18 @@ def test_device_forms_state_op_method_subprotocol_and_come_http_first():
     td["forms"] = LAYOUT.thing_forms("barrel-1")
     assert validate_td(td) == []
     nodes = td["properties"]["skinNodes"]["forms"]
-    assert [f["op"] for f in nodes] == [["readproperty"], ["observeproperty"],
+    assert [f["op"] for f in nodes] == [["readproperty"], ["observeproperty", "unobserveproperty"],
                                        ["readproperty", "observeproperty", "unobserveproperty"]]
     assert nodes[0]["href"] == "http://127.0.0.1:8080/wot/barrel-1/properties/skinNodes"
-    assert nodes[1]["subprotocol"] == "sse" and nodes[1]["contentType"] == "text/event-stream"
+    # SSE: the subprotocol says it; contentType is the data's, which node-wot decodes by
+    assert nodes[1]["subprotocol"] == "sse" and nodes[1]["contentType"] == "application/json"
     assert nodes[2]["href"] == "ws://127.0.0.1:8081/barrel-1"
     event = td["events"]["skinDeformedDetection"]["forms"]
     assert event[0] == {"href": "http://127.0.0.1:8080/wot/barrel-1/events/skinDeformedDetection",
-                        "op": ["subscribeevent"], "htv:methodName": "GET", "subprotocol": "sse",
-                        "contentType": "text/event-stream"}
-    assert {op for f in td["forms"] for op in f["op"]} == {"readallproperties", "subscribeallevents"}
+                        "op": ["subscribeevent", "unsubscribeevent"], "htv:methodName": "GET",
+                        "subprotocol": "sse", "contentType": "application/json"}
+    assert {op for f in td["forms"] for op in f["op"]} == {"readallproperties", "subscribeallevents",
+                                                           "unsubscribeallevents"}
 
 
 def test_with_forms_rebases_a_recorded_td_on_another_server():

@@ -160,3 +160,15 @@ def test_invariants(d, sparsity, eps):
     rel = proc.process(TactileFrame(1, np.zeros_like(d)))
     assert rel.is_release == bool(expected.size)
     np.testing.assert_array_equal(rel.deformed_nodes, expected)
+
+
+def test_a_finite_displacement_whose_norm_overflows_is_refused_not_published_as_inf():
+    """A driver scale gone wrong (taxel ``kpa_per_count = 1e300``) gives finite values whose ‖D‖ is
+    inf: the frame is refused (the pipeline counts a frame error) instead of ``Infinity`` in JSON."""
+    proc = FrameProcessor(PAD)
+    d = np.zeros((PAD.n_nodes, 3))
+    d[PAD.free_indices[:3], 2] = 1e300
+    with pytest.raises(FrameError, match="overflows"):
+        proc.process(TactileFrame(0, d))
+    d[PAD.free_indices[:3], 2] = -0.5  # the next sane frame is processed as usual
+    assert proc.process(TactileFrame(1, d)).packet_due

@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 
 from wott_hub.config import HubConfig
-from wott_hub.hub import demo_devices
+from wott_hub.examples.demo import demo_devices
 from wott_hub.network import DirectoryConfig
 
 CHROMIUM = os.environ.get("WOTT_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--enable-unsafe-swiftshader",  # WebGL on the CPU (plotly's 3D) without a GPU
+    "--enable-unsafe-swiftshader",  # WebGL on the CPU (the device page's three.js) without a GPU
 ]
 
 

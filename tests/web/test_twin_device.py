@@ -19,7 +19,7 @@ READY = "window.twin && window.twin.page === 'device' && window.twin.ready"
 
 def device_url(twin, thing_id: str) -> str:
     """The device page for a Thing, given by its TD's URL in the directory (as the fleet page links it)."""
-    td_url = f"{twin.url}/things/{quote(f'urn:wott-hub:device:{thing_id}', safe='')}"
+    td_url = f"{twin.url}/things/{quote(twin.hub.identity.device_id(thing_id), safe='')}"
     return f"{twin.url}/twin/device.html?td={quote(td_url, safe='')}"
 
 
@@ -41,7 +41,7 @@ def test_device_page_builds_the_mesh_from_the_td_and_deforms_it_live(twin, barre
     assert (st["nodes"], st["cells"]) == (nodes["numOfNodes"], cells["numOfCells"]) == (707, 1374)
     trace = page.evaluate("(() => { const d = document.getElementById('skin').data[0];"
                           " return {type: d.type, n: d.x.length, tri: d.i.length}; })()")
-    assert trace == {"type": "mesh3d", "n": 707, "tri": 1374}
+    assert trace == {"type": "mesh", "n": 707, "tri": 1374}
     assert page.locator("#skin canvas").count() >= 1
     # the scene presses 4 mm: a deep packet is drawn, coloured by intensity, and actions show
     # (the trace's intensities are those of the packet applied last, checked in the same instant)
@@ -58,6 +58,11 @@ def test_device_page_builds_the_mesh_from_the_td_and_deforms_it_live(twin, barre
     page.uncheck("#freeze")
     assert page.evaluate("window.twin.freeze") is False
     assert page.evaluate("window.twin.packets") > page.evaluate("window.twin.frames") > 0  # coalesced
+    # none lost: every packet was drawn or coalesced into a later draw (or waits for the next one),
+    # and a draw uploads only the nodes that changed, not the whole mesh
+    acc = page.evaluate("window.__twinStats.snapshot()")
+    assert acc["packets"] == acc["coalesced"] + acc["waiting"] + acc["dropped"] and acc["dropped"] == 0
+    assert acc["draws"] > 1 and acc["uploaded"] < acc["draws"] * 707
     assert page.errors == []
 
 
@@ -116,7 +121,8 @@ def test_replay_control_plays_pauses_resumes_and_goes_live(twin, barrel, wait):
     page.select_option("#range", "-10s")
     page.click("#play")
     wait(page, "window.twin.replay.state === 'playing' && window.twin.mode === 'replay'"
-                           " && window.twin.thing === 'urn:wott-hub:replay:barrel' && window.twin.frames > 2",
+                           f" && window.twin.thing === '{twin.hub.identity.replay_id('barrel')}'"
+                           " && window.twin.frames > 2",
                            timeout=15_000)
     assert httpx.get(f"{twin.url}/wot/replay-barrel").status_code == 200
     page.click("#pause")
@@ -127,7 +133,8 @@ def test_replay_control_plays_pauses_resumes_and_goes_live(twin, barrel, wait):
     wait(page, f"window.twin.replay.state === 'playing' && window.twin.last"
                            f" && window.twin.last.stamp > {paused_at}", timeout=15_000)
     page.click("#live")
-    wait(page, "window.twin.mode === 'live' && window.twin.thing === 'urn:wott-hub:device:barrel'"
+    live_id = twin.hub.identity.device_id("barrel")
+    wait(page, f"window.twin.mode === 'live' && window.twin.thing === '{live_id}'"
                            " && window.twin.packets > 0", timeout=15_000)
     assert httpx.get(f"{twin.url}/wot/replay-barrel").status_code == 404
     assert page.evaluate("window.twin.replay.error") is None and page.errors == []

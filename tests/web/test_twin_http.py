@@ -22,24 +22,31 @@ def test_root_serves_the_fleet_page_and_its_modules(http):
     r = http.get("/")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     assert '<script type="module" src="/twin/fleet.js">' in r.text
-    for name in ("fleet.js", "device.js", "wot.js", "skin.js", "replay.js"):
+    for name in ("fleet.js", "device.js", "wot.js", "skin.js", "replay.js", "render3d.js"):
         r = http.get(f"/twin/{name}")
         assert r.status_code == 200 and r.headers["content-type"].startswith("text/javascript"), name
     assert http.get("/twin/device.html").headers["content-type"].startswith("text/html")
     assert http.get("/twin/nothing.js").status_code == 404
 
 
-def test_plotly_comes_from_the_installed_package_compressed_and_revalidated(http):
-    shipped = (resources.files("plotly") / "package_data" / "plotly.min.js").read_bytes()
-    r = http.get("/twin/vendor/plotly.min.js", headers={"Accept-Encoding": "gzip"})
-    assert r.status_code == 200 and r.headers["content-encoding"] == "gzip"
-    assert r.content == shipped  # httpx decodes the gzip body
+def test_three_js_is_vendored_with_its_licence_and_served_compressed(http):
+    """The device page's renderer ships in the package (nothing fetched at run time)."""
+    vendor = resources.files("wott_hub.web") / "static" / "vendor"
+    shipped = (vendor / "three.module.min.js").read_bytes()
+    r = http.get("/twin/vendor/three.module.min.js", headers={"Accept-Encoding": "gzip"})
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/javascript")
+    assert r.headers["content-encoding"] == "gzip" and r.content == shipped  # httpx decodes the gzip body
     assert int(r.headers["content-length"]) < len(shipped) / 2
-    etag = r.headers["etag"]
-    again = http.get("/twin/vendor/plotly.min.js", headers={"If-None-Match": etag})
+    again = http.get("/twin/vendor/three.module.min.js", headers={"If-None-Match": r.headers["etag"]})
     assert again.status_code == 304 and again.content == b""
-    plain = http.get("/twin/vendor/plotly.min.js", headers={"Accept-Encoding": "identity"})
+    plain = http.get("/twin/vendor/three.module.min.js", headers={"Accept-Encoding": "identity"})
     assert "content-encoding" not in plain.headers and plain.content == shipped
+    controls = http.get("/twin/vendor/OrbitControls.js")
+    assert controls.status_code == 200 and 'from "./three.module.min.js"' in controls.text
+    licence = http.get("/twin/vendor/three.LICENSE")
+    assert licence.headers["content-type"].startswith("text/plain") and "MIT License" in licence.text
+    assert "plotly" not in http.get("/twin/device.html").text  # no longer on the device page
+    assert http.get("/twin/vendor/nothing.js").status_code == 404
 
 
 def test_hub_thing_declares_replay_actions_with_post_forms(twin, http):

@@ -8,6 +8,7 @@ they expire; when the hub dies, its TDs expire on their own.
 from __future__ import annotations
 
 import asyncio
+import builtins
 import contextlib
 import json
 import logging
@@ -115,7 +116,8 @@ class DirectoryClient:
     async def directory_description(self) -> dict[str, Any]:
         """The directory's own TD from ``/.well-known/wot`` at the host's root."""
         resp = await self.request("GET", urljoin(self.url, "/.well-known/wot"))
-        return json.loads(resp.body)
+        doc: dict[str, Any] = json.loads(resp.body)
+        return doc
 
     async def put(self, td: dict[str, Any]) -> bool:
         """Create or replace a TD with an id; True if created."""
@@ -130,7 +132,8 @@ class DirectoryClient:
 
     async def get(self, thing_id: str) -> dict[str, Any]:
         resp = await self.request("GET", self.thing_url(thing_id), accept="application/td+json")
-        return json.loads(resp.body)
+        td: dict[str, Any] = json.loads(resp.body)
+        return td
 
     async def patch(self, thing_id: str, patch: dict[str, Any]) -> None:
         await self.request("PATCH", self.thing_url(thing_id), patch, "application/merge-patch+json")
@@ -161,10 +164,11 @@ class DirectoryClient:
             items += more
         return items
 
-    async def search(self, query: str) -> list[Any]:
+    async def search(self, query: str) -> builtins.list[Any]:
         """An RFC 9535 JSONPath query over all TDs; a bad query raises ``ProblemError`` (400)."""
         resp = await self.request("GET", f"{self.url}search/jsonpath?{urlencode({'query': query})}")
-        return json.loads(resp.body)
+        values: builtins.list[Any] = json.loads(resp.body)
+        return values
 
     def events(self, kind: str | None = None, diff: bool = False,
                last_event_id: str | int | None = None) -> EventStream:

@@ -8,6 +8,19 @@ each produces at most one lifecycle event, published after the commit.
 A write that changes nothing but the registration times (a producer
 refreshing its ttl) only moves ``expires``: it keeps ``modified`` and emits no
 event, so fleets of hubs refreshing their Things do not flood subscribers.
+
+Held TDs (issue 16): a TD written through this in-process API (``remote=False``,
+the default; the embedding hub registers its devices and its hub Thing so) is
+*held* by the embedder, and writes from HTTP clients (``remote=True``, what the
+handlers pass) to its id are refused with 403, token or not. The mark lives in
+memory: an embedder that re-registers its Things before it lets HTTP requests
+through (the hub does: its router holds requests until then) needs no more.
+
+Search runs on one thread of its own with a time budget counted from the
+request (see ``search.py``); at most ``MAX_PENDING_SEARCHES`` wait for it, more
+get 503 at once. TDs stored before the depth limit existed and deeper than it
+stay readable by id but are left out of searches (logged at start), so nothing
+stored can make a search fail for everyone.
 """
 
 from __future__ import annotations
@@ -18,43 +31,55 @@ import gc
 import heapq
 import logging
 import secrets
+import time
 import uuid
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
 from sqlalchemy.engine import Engine
 
-from .errors import BadRequest, Forbidden, NotFound, ValidationFailed
+from .errors import BadRequest, DirectoryError, Forbidden, NotFound, ValidationFailed
 from .events import Event, EventHub
 from .mergepatch import apply_merge_patch, merge_diff
 from .registration import Enriched, enrich, iso, same_content
-from .search import SearchEngine
+from .search import SearchEngine, SearchTimedOut
 from .selftd import directory_td
 from .settings import DirectorySettings
 from .store import ThingStore
-from .validation import check_td
+from .validation import MAX_TD_DEPTH, check_depth, check_td, json_depth
 
 __all__ = ["Directory"]
 
 log = logging.getLogger("wott_directory")
+
+_R = TypeVar("_R")
+
+MAX_PENDING_SEARCHES = 16
+"""Searches queued for the search thread; past that a search gets 503 at once."""
 
 
 class Directory:
     """A Thing Description Directory; serve it with ``make_app`` or ``directory_handlers``."""
 
     def __init__(self, settings: DirectorySettings | None = None, engine: Engine | str = "sqlite://", *,
-                 create_tables: bool = True) -> None:
+                 create_tables: bool = True, td_security: Mapping[str, Any] | None = None) -> None:
         """``create_tables=False`` when the owner of ``engine`` migrates the schema itself (the hub's
         Alembic revisions create ``tdd_things`` and ``tdd_events``): the directory then only checks
-        they exist, so ``create_all`` never races or contradicts the migrations."""
+        they exist, so ``create_all`` never races or contradicts the migrations. ``td_security``:
+        the schemes a server in front of it enforces, declared in its own TD (``selftd.directory_td``)."""
         self.settings = settings or DirectorySettings()
+        self.td_security = td_security
         self.store = ThingStore(engine, create_tables=create_tables)
         self.search_engine = SearchEngine(max_length=self.settings.max_query_length)
         self.events = EventHub(self.settings.event_retention, self.settings.sse_queue)
         self._things: dict[str, Enriched] = {}
         self._anonymous: set[str] = set()
         self._own: set[str] = set()
+        self._held: set[str] = set()
+        self._unsearchable: set[str] = set()
+        self._pending_searches = 0
         self._ids: list[str] = []
         self._expiry: list[tuple[float, str]] = []
         self._array: list[dict[str, Any]] | None = None
@@ -78,10 +103,16 @@ class Directory:
                 self._anonymous.add(t.id)
             if t.own:
                 self._own.add(t.id)
+            if json_depth(t.td, MAX_TD_DEPTH) > MAX_TD_DEPTH:
+                self._unsearchable.add(t.id)
             if rec.expires is not None:
                 self._expiry.append((rec.expires.timestamp(), t.id))
         self._ids = sorted(self._things)
         heapq.heapify(self._expiry)
+        if self._unsearchable:
+            log.warning("%d stored TD(s) nest deeper than %d levels and are left out of searches until "
+                        "replaced: %s", len(self._unsearchable), MAX_TD_DEPTH,
+                        ", ".join(sorted(self._unsearchable)[:10]))
         self.events.restore(events)
         self._trimmed_to = max(0, self.events.last_id - self.settings.event_retention)
         self._writes_since_freeze = 0
@@ -120,7 +151,7 @@ class Directory:
         return self.get(self.own_id)
 
     async def _publish_self(self) -> None:
-        td = directory_td(self.settings)
+        td = directory_td(self.settings, td_security=self.td_security)
         async with self._lock:
             for stale in sorted(self._own - {td["id"]}):
                 if stale in self._things:
@@ -155,18 +186,50 @@ class Directory:
     def snapshot(self) -> list[dict[str, Any]]:
         """The array JSONPath queries run on (shared, never mutated: treat as read-only)."""
         if self._array is None:
-            self._array = [self._things[i].td for i in self._ids]
+            skip = self._unsearchable
+            self._array = [self._things[i].td for i in self._ids if i not in skip]
         return self._array
 
+    def held(self, thing_id: str) -> bool:
+        """Whether ``thing_id`` was written in-process, so HTTP clients may not change it."""
+        return thing_id in self._held
+
     async def search(self, query: str) -> list[Any]:
-        """Values the RFC 9535 query selects from the array of all TDs (400 on a bad query)."""
-        compiled = self.search_engine.compile(query)
+        """Values the RFC 9535 query selects from the array of all TDs (400 on a bad query,
+        400/503 naming the budget when it costs too much)."""
+        return await self._search(query, lambda results: results)
+
+    async def search_json(self, query: str, dumps: Callable[[Any], bytes]) -> bytes:
+        """``search`` serialised by ``dumps`` on the search thread (a large answer is not encoded
+        on the IOLoop)."""
+        return await self._search(query, dumps)
+
+    async def _search(self, query: str, finish: Callable[[list[Any]], _R]) -> _R:
+        engine = self.search_engine
+        deadline = time.monotonic() + engine.time_budget_s
         data = self.snapshot()
-        return await asyncio.get_running_loop().run_in_executor(self._search_executor, compiled.run, data)
+        if self._pending_searches >= MAX_PENDING_SEARCHES:
+            raise DirectoryError(503, f"{MAX_PENDING_SEARCHES} searches are already waiting "
+                                      "(MAX_PENDING_SEARCHES); try again shortly", [], {"Retry-After": "1"})
+
+        def run() -> _R:  # compiling a long query takes a while too: not on the IOLoop either
+            compiled = engine.compile(query)
+            return finish(compiled.run_within(data, deadline, engine.time_budget_s, engine.max_nodes))
+
+        self._pending_searches += 1
+        try:
+            return await asyncio.wait_for(
+                asyncio.get_running_loop().run_in_executor(self._search_executor, run),
+                engine.time_budget_s + 1.0)
+        except TimeoutError:  # the thread checks its deadline itself; this only bounds the answer
+            raise SearchTimedOut(engine.time_budget_s) from None
+        finally:
+            self._pending_searches -= 1
 
     # -- writes ----------------------------------------------------------------
-    async def put(self, thing_id: str, td: Any) -> bool:
-        """Create or replace the TD ``thing_id`` (PUT); True if it was created."""
+    async def put(self, thing_id: str, td: Any, *, remote: bool = False) -> bool:
+        """Create or replace the TD ``thing_id`` (PUT); True if it was created. ``remote``: an HTTP
+        client's write, refused on held ids; otherwise the embedder's, and the id becomes held."""
         if not isinstance(td, dict):
             check_td(td)
         if "id" not in td:
@@ -176,12 +239,18 @@ class Directory:
             raise ValidationFailed([{"field": "$.id", "description":
                                      f"{td['id']!r} does not match the id in the URL ({thing_id!r})"}])
         self._check_not_own(thing_id)
+        self._check_not_held(thing_id, remote)
         check_td(td)
         async with self._lock:
-            return await self._put_locked(thing_id, td, anonymous=thing_id in self._anonymous)
+            self._check_not_held(thing_id, remote)  # the embedder may have put it meanwhile
+            created = await self._put_locked(thing_id, td, anonymous=thing_id in self._anonymous)
+            if not remote:
+                self._held.add(thing_id)
+            return created
 
-    async def create_anonymous(self, td: Any) -> str:
-        """Register a TD without id (POST); returns the ``urn:uuid`` id it was given."""
+    async def create_anonymous(self, td: Any, *, remote: bool = False) -> str:
+        """Register a TD without id (POST); returns the ``urn:uuid`` id it was given (held unless
+        ``remote``, as with ``put``)."""
         if isinstance(td, dict) and "id" in td:
             raise ValidationFailed([{"field": "$.id", "description":
                                      "a TD with an id must be created with PUT /things/{id}"}])
@@ -198,17 +267,21 @@ class Directory:
         check_td(with_id)
         async with self._lock:
             await self._put_locked(thing_id, with_id, anonymous=True)
+            if not remote:
+                self._held.add(thing_id)
         return thing_id
 
-    async def patch(self, thing_id: str, patch: Any) -> None:
-        """Apply a JSON merge patch, then validate the result as a whole TD."""
+    async def patch(self, thing_id: str, patch: Any, *, remote: bool = False) -> None:
+        """Apply a JSON merge patch, then validate the result as a whole TD (``remote`` as for ``put``)."""
         if not isinstance(patch, dict):
             raise BadRequest("A merge patch of a TD must be a JSON object (a Partial TD)")
+        check_depth(patch, "The merge patch")  # applying it recurses as deep as it nests
         self._check_not_own(thing_id)
         async with self._lock:
             prev = self._things.get(thing_id)
             if prev is None:
                 raise NotFound(f"No TD with id {thing_id!r}")
+            self._check_not_held(thing_id, remote)
             candidate = apply_merge_patch(prev.td, patch)
             if candidate.get("id") != thing_id:
                 raise ValidationFailed([{"field": "$.id",
@@ -216,16 +289,22 @@ class Directory:
             check_td(candidate)
             await self._put_locked(thing_id, candidate, anonymous=thing_id in self._anonymous)
 
-    async def delete(self, thing_id: str) -> None:
+    async def delete(self, thing_id: str, *, remote: bool = False) -> None:
         self._check_not_own(thing_id)
         async with self._lock:
             if thing_id not in self._things:
                 raise NotFound(f"No TD with id {thing_id!r}")
+            self._check_not_held(thing_id, remote)
             await self._delete_locked(thing_id)
 
     def _check_not_own(self, thing_id: str) -> None:
         if thing_id == self.own_id:
             raise Forbidden("The directory's own TD is managed by the directory")
+
+    def _check_not_held(self, thing_id: str, remote: bool) -> None:
+        if remote and thing_id in self._held:
+            raise Forbidden(f"The TD {thing_id!r} is registered by the application serving this directory "
+                            "(the hub) and only it can change or delete it")
 
     async def _put_locked(self, thing_id: str, td: dict[str, Any], anonymous: bool) -> bool:
         prev = self._things.get(thing_id)
@@ -246,6 +325,7 @@ class Directory:
         await self.store.write(upserts=[row], events=[event] if event else [],
                                new_ids=[] if prev else [thing_id])
         self._things[thing_id] = rec
+        self._unsearchable.discard(thing_id)  # a TD written now passed the depth check
         if prev is None:
             bisect.insort(self._ids, thing_id)
             if anonymous:
@@ -262,6 +342,8 @@ class Directory:
         await self.store.write(deletes=[thing_id], events=[event])
         del self._things[thing_id]
         self._anonymous.discard(thing_id)
+        self._held.discard(thing_id)
+        self._unsearchable.discard(thing_id)
         i = bisect.bisect_left(self._ids, thing_id)
         del self._ids[i]
         self._changed()

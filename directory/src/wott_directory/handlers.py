@@ -3,6 +3,13 @@
 ``directory_handlers(directory, prefix)`` returns plain tornado routes so a hub
 can mount the directory in its own Application (same IOLoop); ``make_app``
 wraps them in an Application of their own for the standalone command.
+
+Every answer carries ``Access-Control-Allow-Origin: *`` like the hub's other
+routes, every route answers ``OPTIONS`` (a CORS preflight: 204 with the methods
+it allows, never behind the token, which preflights do not carry), and unknown
+paths under the directory's prefixes answer a problem+json 404. Writes from
+HTTP clients are ``remote`` writes: the directory refuses them (403) on the TDs
+its embedder holds (``Directory`` docstring).
 """
 
 from __future__ import annotations
@@ -49,11 +56,29 @@ def _dumps(doc: Any) -> bytes:
     return json.dumps(doc, ensure_ascii=False, separators=(",", ":")).encode("utf-8")
 
 
+_ALLOW_HEADERS = "Authorization, Content-Type, Accept, Last-Event-ID"
+_EXPOSE_HEADERS = "Location, Link, ETag, Retry-After, WWW-Authenticate"
+
+
 class BaseHandler(RequestHandler):
     directory: Directory
+    methods = "GET, HEAD, OPTIONS"
+    """What ``OPTIONS`` announces (``Allow`` and ``Access-Control-Allow-Methods``)."""
 
     def initialize(self, directory: Directory) -> None:
         self.directory = directory
+
+    def set_default_headers(self) -> None:
+        self.set_header("Access-Control-Allow-Origin", "*")
+        self.set_header("Access-Control-Expose-Headers", _EXPOSE_HEADERS)
+
+    def options(self, *_args: Any) -> None:
+        self.set_status(204)
+        self.set_header("Allow", self.methods)
+        self.set_header("Access-Control-Allow-Methods", self.methods)
+        self.set_header("Access-Control-Allow-Headers", _ALLOW_HEADERS)
+        self.set_header("Access-Control-Max-Age", "600")
+        self.finish()
 
     @property
     def conf(self) -> DirectorySettings:
@@ -115,6 +140,10 @@ class NotFoundHandler(BaseHandler):
         raise NotFound(f"No resource at {self.request.path}")
 
 
+def _preflight(handler: RequestHandler) -> bool:
+    return handler.request.method == "OPTIONS"
+
+
 def _media_type(value: str | None) -> str | None:
     return value.split(";", 1)[0].strip().lower() if value else None
 
@@ -124,18 +153,33 @@ class _BodyHandler(BaseHandler):
     """Reads the body itself so an oversized one is answered with 413, not a dropped connection
     (tornado's own ``max_body_size`` closes the connection without a response)."""
 
+    _bad_path: DirectoryError | None = None
+
+    def decode_argument(self, value: bytes, name: str | None = None) -> str:
+        """A path that is not UTF-8 is refused like the rest: after the body is read (tornado's own
+        400 comes before, and the client sending a body sees a reset connection)."""
+        try:
+            return super().decode_argument(value, name)
+        except HTTPError:
+            if name is not None:  # a query argument, decoded while handling: answered normally
+                raise
+            self._bad_path = BadRequest(f"The path is not valid UTF-8: {value[:80]!r}")
+            return value.decode("latin-1")
+
     def prepare(self) -> None:
         self._chunks: list[bytes] = []
         self._size = 0
         self._too_big = False
-        self._refused: DirectoryError | None = None
+        self._refused: DirectoryError | None = self._bad_path
+        if _preflight(self):  # a CORS preflight never carries the token
+            return
         if self.request.method in ("PUT", "POST", "PATCH", "DELETE"):
             # Refusals are answered once the body is read (and dropped): a response sent while
             # the client is still sending is lost to a connection reset.
             try:
                 self.authorize(write=True)
             except DirectoryError as e:
-                self._refused = e
+                self._refused = e  # not authorised comes before a bad path
             length = self.request.headers.get("Content-Length")
             self._too_big = bool(length and length.isdigit() and int(length) > self.conf.max_body_bytes)
         else:
@@ -175,6 +219,8 @@ class _BodyHandler(BaseHandler):
 
 class ThingsHandler(_BodyHandler):
     """``/things``: listing (GET/HEAD) and anonymous creation (POST)."""
+
+    methods = "GET, HEAD, POST, OPTIONS"
 
     def _int_arg(self, name: str, minimum: int) -> int | None:
         raw = self.get_query_argument(name, None)
@@ -224,7 +270,7 @@ class ThingsHandler(_BodyHandler):
 
     async def post(self) -> None:
         td = self.json_body(TD_INPUT_TYPES, required=False)
-        thing_id = await self.directory.create_anonymous(td)
+        thing_id = await self.directory.create_anonymous(td, remote=True)
         self.set_status(201)
         self.set_header("Location", f"{self.conf.base_url}things/{quote(thing_id, safe=':')}")
         self.finish()
@@ -232,6 +278,8 @@ class ThingsHandler(_BodyHandler):
 
 class ThingHandler(_BodyHandler):
     """``/things/{id}``: retrieve, create/replace, merge-patch, delete one TD."""
+
+    methods = "GET, HEAD, PUT, PATCH, DELETE, OPTIONS"
 
     def get(self, thing_id: str) -> None:
         self.check_refused()
@@ -241,33 +289,35 @@ class ThingHandler(_BodyHandler):
 
     async def put(self, thing_id: str) -> None:
         td = self.json_body(TD_INPUT_TYPES, required=False)
-        created = await self.directory.put(thing_id, td)
+        created = await self.directory.put(thing_id, td, remote=True)
         self.set_status(201 if created else 204)
         self.finish()
 
     async def patch(self, thing_id: str) -> None:
         patch = self.json_body({MERGE_PATCH_TYPE}, required=True)
-        await self.directory.patch(thing_id, patch)
+        await self.directory.patch(thing_id, patch, remote=True)
         self.set_status(204)
         self.finish()
 
     async def delete(self, thing_id: str) -> None:
         self.check_refused()
-        await self.directory.delete(thing_id)
+        await self.directory.delete(thing_id, remote=True)
         self.set_status(204)
         self.finish()
 
 
 class JSONPathHandler(BaseHandler):
     def prepare(self) -> None:
-        self.authorize(write=False)
+        if not _preflight(self):
+            self.authorize(write=False)
 
     async def get(self) -> None:
         query = self.get_query_argument("query", None, strip=False)
         if not query:
             raise BadRequest("The query argument (an RFC 9535 JSONPath expression) is required")
-        results = await self.directory.search(query)
-        self.write_json(results, JSON_TYPE)
+        body = await self.directory.search_json(query, _dumps)
+        self.set_header("Content-Type", JSON_TYPE)
+        self.finish(body)
 
     head = get
 
@@ -298,7 +348,8 @@ class EventsHandler(BaseHandler):
     _keepalive: asyncio.TimerHandle
 
     def prepare(self) -> None:
-        self.authorize(write=False)
+        if not _preflight(self):
+            self.authorize(write=False)
 
     def _types(self, kind: str | None) -> tuple[str, ...]:
         if kind is None:
@@ -345,8 +396,8 @@ class EventsHandler(BaseHandler):
         self._keepalive = asyncio.get_running_loop().call_later(self.conf.sse_keepalive, self._ping)
         try:
             self.write(b": wott-directory events\n\n")
-            for ev in missed:
-                self.write(ev.sse(diff))
+            for old in missed:
+                self.write(old.sse(diff))
             await self.flush()
             while not (sub.closed or sub.overflowed):
                 ev = await sub.queue.get()
@@ -375,7 +426,7 @@ class EventsHandler(BaseHandler):
         if sub is None or sub.closed:
             return
         if sub.queue.empty():
-            sub.queue.put_nowait(_KEEPALIVE)  # type: ignore[arg-type]
+            sub.queue.put_nowait(_KEEPALIVE)  # type: ignore[arg-type]  # a sentinel, told apart by identity
         self._keepalive = asyncio.get_running_loop().call_later(self.conf.sse_keepalive, self._ping)
 
     def on_connection_close(self) -> None:
@@ -383,12 +434,13 @@ class EventsHandler(BaseHandler):
             self._sub.close()
 
 
-def directory_handlers(directory: Directory, prefix: str = "", well_known: bool = True) -> list[tuple]:
+def directory_handlers(directory: Directory, prefix: str = "",
+                       well_known: bool = True) -> list[tuple[Any, ...]]:
     """Tornado routes of the directory API under ``prefix`` (e.g. ``/tdd``); mount them in any
     Application. ``well_known`` adds ``/.well-known/wot`` (always at the host's root)."""
     p = prefix.rstrip("/")
     kw = {"directory": directory}
-    routes: list[tuple] = [
+    routes: list[tuple[Any, ...]] = [
         (rf"{p}/things", ThingsHandler, kw),
         (rf"{p}/things/(.+)", ThingHandler, kw),
         (rf"{p}/search/jsonpath", JSONPathHandler, kw),
@@ -398,6 +450,9 @@ def directory_handlers(directory: Directory, prefix: str = "", well_known: bool 
     ]
     if well_known:
         routes.append((r"/\.well-known/wot", WellKnownHandler, kw))
+    # the rest of the directory's paths (``/things/``, ``/search/other``, ``/events/a/b``): a problem
+    # here, not the embedding application's (HTML) default
+    routes.append((rf"{p}/(?:things|search|events)(?:/.*)?", NotFoundHandler, kw))
     return routes
 
 

@@ -54,4 +54,4 @@ def same_json(a: Any, b: Any) -> bool:
         return a.keys() == b.keys() and all(same_json(v, b[k]) for k, v in a.items())
     if isinstance(a, list):
         return len(a) == len(b) and all(map(same_json, a, b))
-    return a == b
+    return bool(a == b)

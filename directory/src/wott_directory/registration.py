@@ -14,7 +14,7 @@ from typing import Any
 
 from .errors import ValidationFailed
 from .mergepatch import same_json
-from .validation import parse_rfc3339
+from .validation import MAX_TTL_S, parse_rfc3339
 
 __all__ = ["DISCOVERY_CONTEXT", "Enriched", "enrich", "iso", "same_content", "with_context"]
 
@@ -64,10 +64,14 @@ class Enriched:
 
 def enrich(td: dict[str, Any], now: datetime, previous: Enriched | None) -> Enriched:
     """The Enriched TD for a create or update of ``td`` at ``now``."""
-    reg_in = td.get("registration") if isinstance(td.get("registration"), dict) else {}
+    given = td.get("registration")
+    reg_in: dict[str, Any] = given if isinstance(given, dict) else {}
     ttl = reg_in.get("ttl")
     expires: datetime | None = None
     if isinstance(ttl, int | float) and not isinstance(ttl, bool):
+        if not 0 < ttl <= MAX_TTL_S:  # check_td says so first; never an OverflowError here
+            raise ValidationFailed([{"field": "$.registration.ttl",
+                                     "description": f"ttl must be in (0, {MAX_TTL_S}] s"}])
         expires = now + timedelta(seconds=ttl)
     elif isinstance(reg_in.get("expires"), str):
         expires = parse_rfc3339(reg_in["expires"])

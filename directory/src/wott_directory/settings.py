@@ -3,19 +3,40 @@
 The same settings serve the standalone ``wott-directory`` command and a hub
 that embeds the directory, so nothing here knows about sockets: the embedding
 server says where it listens and the directory derives its public URL from that.
+
+Declared once, like the hub's own tables (``wott_hub.configspec``): each field's
+type carries its bounds (``Annotated[int, Meta(ge=1, le=10_000)]``) and its
+description. ``DirectorySettings`` stays a frozen dataclass (what embedding
+programs build and ``dataclasses.replace``); the msgspec ``Struct`` derived from
+it (``TABLE``) checks every value when the settings are made, from the command
+line or in Python, and gives the JSON Schema (``settings_schema``). A NaN, an
+infinity, a wrong type or a value out of bounds is this distribution's one
+``ConfigError``, naming the setting: ``page_size: a whole number, got 0; must be
+from 1 to 10000``. The directory is its own distribution and does not depend on
+wott_hub; a hub that embeds it builds these settings from its already checked
+``[directory]`` table and translates a ``ConfigError`` from here into its own
+once (``wott_hub.network.config.embedded_directory_settings``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import ipaddress
+import re
 import uuid
 from dataclasses import dataclass, replace
+from typing import Annotated, Any, get_type_hints
 
-__all__ = ["ConfigError", "DirectorySettings", "is_loopback"]
+import msgspec
+import msgspec.inspect as mi
+import msgspec.json
+from msgspec import Meta
+
+__all__ = ["TABLE", "ConfigError", "DirectorySettings", "is_loopback", "settings_schema"]
 
 
 class ConfigError(ValueError):
-    """Settings that would make the directory unsafe or unusable."""
+    """Settings that would make the directory unsafe or unusable (the directory's only config error)."""
 
 
 def is_loopback(host: str) -> bool:
@@ -33,46 +54,57 @@ def is_loopback(host: str) -> bool:
 class DirectorySettings:
     """Everything configurable about a directory; every field has a safe default."""
 
-    base_url: str = "http://127.0.0.1:8090/"
-    """Public URL of the directory API, ending in ``/``; the TD's ``base`` and the Link headers use it."""
-    title: str = "wott-hub Thing Description Directory"
-    thing_id: str | None = None
-    """Id of the directory's own TD; default: a UUID derived from ``base_url`` (stable across restarts)."""
-    token: str | None = None
-    """Bearer token that authorises writes (and reads when ``protect_reads``)."""
-    open_writes: bool = False
-    """Let loopback clients write without a token. Refused unless the directory is bound to loopback."""
-    protect_reads: bool = False
-    """Require the token for listing, retrieval, search and events too (the directory's TD stays open)."""
-    max_body_bytes: int = 2 * 1024 * 1024
-    page_size: int = 100
-    """Largest page the listing returns; a larger ``limit`` is capped and the rest follows a next link."""
-    purge_interval: float = 1.0
-    """Seconds between sweeps for expired TDs (they disappear at most this late)."""
-    event_retention: int = 10_000
-    """How many past events are kept for ``Last-Event-ID`` replay."""
-    sse_keepalive: float = 15.0
-    sse_queue: int = 10_000
-    """Events buffered per slow SSE client before it is disconnected (it resumes with Last-Event-ID)."""
-    max_query_length: int = 4096
-    freeze_gc: bool = False
+    base_url: Annotated[str, Meta(description=(
+        "Public URL of the directory API, ending in /; the TD's base and the Link headers use it."))] \
+        = "http://127.0.0.1:8090/"
+    title: Annotated[str, Meta(description="Title of the directory's own TD.")] \
+        = "wott-hub Thing Description Directory"
+    thing_id: Annotated[str, Meta(description=(
+        "Id of the directory's own TD; default: a UUID derived from base_url (stable across restarts)."))] \
+        | None = None
+    token: Annotated[str, Meta(description=(
+        "Bearer token that authorises writes (and reads when protect_reads)."))] | None = None
+    open_writes: Annotated[bool, Meta(description=(
+        "Let loopback clients write without a token. Refused unless the directory is bound to loopback."))] \
+        = False
+    protect_reads: Annotated[bool, Meta(description=(
+        "Require the token for listing, retrieval, search and events too "
+        "(the directory's TD stays open)."))] = False
+    max_body_bytes: Annotated[int, Meta(ge=1024, le=2**30, description="Largest accepted TD, bytes.")] \
+        = 2 * 1024 * 1024
+    page_size: Annotated[int, Meta(ge=1, le=10_000, description=(
+        "Largest page the listing returns; a larger limit is capped and the rest follows a next link."))] \
+        = 100
+    purge_interval: Annotated[float, Meta(gt=0, le=3600, description=(
+        "Seconds between sweeps for expired TDs (they disappear at most this late)."))] = 1.0
+    event_retention: Annotated[int, Meta(ge=0, le=10_000_000, description=(
+        "How many past events are kept for Last-Event-ID replay."))] = 10_000
+    sse_keepalive: Annotated[float, Meta(gt=0, le=3600, description=(
+        "Seconds between keep-alive comments on an idle event stream."))] = 15.0
+    sse_queue: Annotated[int, Meta(ge=1, le=10_000_000, description=(
+        "Events buffered per slow SSE client before it is disconnected (it resumes with Last-Event-ID)."))] \
+        = 10_000
+    max_query_length: Annotated[int, Meta(ge=1, le=1_000_000, description=(
+        "Longest search query (JSONPath, XPath, SPARQL), characters."))] = 4096
+    freeze_gc: Annotated[bool, Meta(description=(
+        "Move the TDs out of the cyclic garbage collector's reach (gc.freeze)."))] = False
     """Move the TDs out of the cyclic garbage collector's reach (``gc.freeze``) after loading and
     every ``freeze_every`` writes. A full collection walks every object, ~0.5-3 s with 10,000 TDs
     in memory, and stalls the IOLoop; TDs are acyclic JSON trees, freed by reference counting
     anyway. Process-wide, so off by default in a library; the standalone command turns it on."""
-    freeze_every: int = 1000
+    freeze_every: Annotated[int, Meta(ge=1, le=10_000_000, description=(
+        "Writes between two gc.freeze calls (freeze_gc)."))] = 1000
 
     def __post_init__(self) -> None:
         if not self.base_url.endswith("/"):
             object.__setattr__(self, "base_url", self.base_url + "/")
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        try:
+            msgspec.convert(values, TABLE)
+        except msgspec.ValidationError as e:
+            raise ConfigError(_explain(str(e), values)) from None
         if self.token is not None and not self.token.strip():
             raise ConfigError("token: empty; leave it unset to have no token")
-        if self.max_body_bytes < 1024:
-            raise ConfigError("max_body_bytes: at least 1024")
-        if self.page_size < 1:
-            raise ConfigError("page_size: at least 1")
-        if self.purge_interval <= 0:
-            raise ConfigError("purge_interval: must be positive")
 
     @property
     def own_id(self) -> str:
@@ -86,3 +118,61 @@ class DirectorySettings:
 
     def with_base_url(self, base_url: str) -> DirectorySettings:
         return replace(self, base_url=base_url)
+
+
+def _table(cls: type[Any]) -> type[msgspec.Struct]:
+    """The msgspec Struct of ``cls``'s fields (types with their bounds, defaults): the checker.
+
+    Derived, not written twice: the dataclass is the declaration."""
+    hints = get_type_hints(cls, include_extras=True)
+    return msgspec.defstruct("DirectoryTable", [(f.name, hints[f.name], f.default)
+                                                 for f in dataclasses.fields(cls)],
+                             kw_only=True, forbid_unknown_fields=True, module=__name__)
+
+
+TABLE = _table(DirectorySettings)
+"""The msgspec Struct that checks ``DirectorySettings``: read a TOML table with ``msgspec.convert``."""
+
+
+def settings_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of the directory's settings: bounds, defaults, descriptions."""
+    return msgspec.json.schema(TABLE)
+
+
+_KIND = {"IntType": "a whole number", "FloatType": "a number", "StrType": "a string",
+         "BoolType": "true or false"}
+
+
+def _explain(message: str, values: dict[str, Any]) -> str:
+    """msgspec's ``Expected `int` >= 1 - at `$.page_size``` as
+    ``page_size: a whole number, got 0; must be from 1 to 10000``."""
+    m = re.search(r"at `\$\.(\w+)`", message)
+    if m is None:
+        return message
+    name = m[1]
+    table = mi.type_info(TABLE)
+    assert isinstance(table, mi.StructType)  # TABLE is a Struct
+    field = next(f for f in table.fields if f.name == name)
+    info = field.type
+    while isinstance(info, mi.Metadata):
+        info = info.type
+    if isinstance(info, mi.UnionType):  # ``str | None``: the member that is not None
+        info = next(t for t in info.types if not isinstance(t, mi.NoneType))
+        while isinstance(info, mi.Metadata):
+            info = info.type
+    text = f"{name}: {_KIND.get(type(info).__name__, 'a valid value')}, got {values[name]!r}"
+    bounds = _range(info)
+    return f"{text}; must be {bounds}" if bounds else text
+
+
+def _range(info: Any) -> str:
+    ge, gt, le = (getattr(info, k, None) for k in ("ge", "gt", "le"))
+    if ge is not None and le is not None:
+        return f"from {_n(ge)} to {_n(le)}"
+    low = f"at least {_n(ge)}" if ge is not None else f"above {_n(gt)}" if gt is not None else ""
+    high = f"at most {_n(le)}" if le is not None else ""
+    return " and ".join(p for p in (low, high) if p)
+
+
+def _n(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else f"{x:g}"

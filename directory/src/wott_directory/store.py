@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, TypeVar
 
-from sqlalchemy import create_engine, delete, event, inspect, select
+from sqlalchemy import create_engine, delete, event, insert, inspect, select, update
 from sqlalchemy.engine import Engine
 from sqlalchemy.pool import StaticPool
 
@@ -43,6 +43,9 @@ def make_engine(url: str) -> Engine:
                 cur.execute("PRAGMA synchronous=NORMAL")
                 cur.close()
         return engine
+    for bare in ("postgresql://", "postgres://"):  # psycopg 3 is the driver installed with us
+        if url.startswith(bare):
+            url = "postgresql+psycopg://" + url.removeprefix(bare)
     return create_engine(url, pool_pre_ping=True)
 
 
@@ -104,14 +107,14 @@ class ThingStore:
             inserts = [u for u in upserts if u["id"] in new_ids]
             updates = [u for u in upserts if u["id"] not in new_ids]
             if inserts:
-                conn.execute(ThingRow.__table__.insert(), [self._row(u) for u in inserts])
+                conn.execute(insert(ThingRow), [self._row(u) for u in inserts])
             for u in updates:
                 row = self._row(u)
-                conn.execute(ThingRow.__table__.update().where(ThingRow.id == row.pop("id")).values(**row))
+                conn.execute(update(ThingRow).where(ThingRow.id == row.pop("id")).values(**row))
             if deletes:
                 conn.execute(delete(ThingRow).where(ThingRow.id.in_(deletes)))
             if events:
-                conn.execute(EventRow.__table__.insert(), [
+                conn.execute(insert(EventRow), [
                     {"id": e.id, "type": e.type, "thing_id": e.thing_id, "created": datetime.now(UTC),
                      "data": None if e.data is None else json.dumps(e.data, ensure_ascii=False)}
                     for e in events])

@@ -11,17 +11,25 @@ Checking a valid TD with the pure-Python validator costs ~5 ms (the TD schema
 is deep); jsonschema-rs answers "valid?" in ~0.02 ms, so it decides first and
 the Python validator only runs to explain a TD that failed. If the two ever
 disagree on a TD, the Python validator's answer (the reference) stands.
+
+Bounds (issue 16): a TD is at most ``MAX_TD_DEPTH`` levels of objects/arrays
+deep (checked iteratively, before the recursive schema validators and before
+a merge patch is applied), so no stored TD can overflow the stack of a search,
+a merge patch or a diff; ``registration.ttl`` is at most ``MAX_TTL_S``; numbers
+must be finite (``1e400`` parses to ``inf``, which is not JSON and would be
+served as ``Infinity``).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Callable
-from datetime import datetime
+from datetime import UTC, datetime
 from functools import cache
 from importlib import resources
-from typing import Any
+from typing import Any, cast
 
 import jsonschema
 import jsonschema_rs
@@ -29,7 +37,15 @@ from jsonschema.exceptions import ValidationError, best_match
 
 from .errors import BadRequest, ValidationFailed
 
-__all__ = ["check_td", "load_data", "parse_json_body", "parse_rfc3339", "schema_problems", "td_problems"]
+__all__ = [
+    "MAX_TD_DEPTH", "MAX_TTL_S", "check_depth", "check_td", "json_depth", "load_data", "parse_json_body",
+    "parse_rfc3339", "schema_problems", "td_problems",
+]
+
+MAX_TD_DEPTH = 64
+"""Levels of nested objects/arrays in a TD (``{}`` is 1); real TDs stay under 15."""
+MAX_TTL_S = 10 * 366 * 86400
+"""Ten years: a longer registration is a mistake (and ``1e20`` s overflows any date)."""
 
 _URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:\S*$")
 _RFC3339 = re.compile(
@@ -64,9 +80,9 @@ def parse_rfc3339(text: str) -> datetime | None:
     """An RFC 3339 date-time (always with an offset), or None if it is not one."""
     if not isinstance(text, str) or not _RFC3339.match(text):
         return None
-    try:
-        return datetime.fromisoformat(text.upper().replace("Z", "+00:00"))
-    except ValueError:
+    try:  # in UTC: an offset can push year 9999 past what datetime holds (OverflowError)
+        return datetime.fromisoformat(text.upper().replace("Z", "+00:00")).astimezone(UTC)
+    except (ValueError, OverflowError):
         return None
 
 
@@ -87,7 +103,7 @@ def schema_problems(validator: jsonschema.protocols.Validator, doc: Any, *,
             err = best_match(err.context)
         if err.validator == "required" and isinstance(err.instance, dict):
             out += [(join(err.json_path, k), "required field is missing")
-                    for k in err.validator_value if k not in err.instance]
+                    for k in cast(list[str], err.validator_value) if k not in err.instance]
         else:
             out.append((err.json_path, _message(err)))
     return list(dict.fromkeys(out))  # the TD schema's anyOf branches repeat some errors
@@ -105,10 +121,42 @@ def _message(err: ValidationError) -> str:
     return err.message.replace(text, text[:60] + "…") if text in err.message else f"{err.validator} failed"
 
 
+def json_depth(doc: Any, stop_after: int | None = None) -> int:
+    """Levels of nested containers in ``doc`` (a scalar is 0, ``{}`` is 1), without recursion;
+    stops counting once past ``stop_after``."""
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(doc, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, dict):
+            children: Any = node.values()
+        elif isinstance(node, list):
+            children = node
+        else:
+            continue
+        if depth > deepest:
+            deepest = depth
+            if stop_after is not None and deepest > stop_after:
+                return deepest
+        stack.extend((child, depth + 1) for child in children if isinstance(child, dict | list))
+    return deepest
+
+
+def check_depth(doc: Any, what: str = "The body") -> None:
+    """400 naming the limit if ``doc`` nests deeper than ``MAX_TD_DEPTH``."""
+    if json_depth(doc, MAX_TD_DEPTH) > MAX_TD_DEPTH:
+        problem = {"field": "$", "description": f"nested more than {MAX_TD_DEPTH} levels deep"}
+        raise ValidationFailed([problem], f"{what} nests objects/arrays more than {MAX_TD_DEPTH} levels deep "
+                               f"(the directory's max_depth)")
+
+
 def td_problems(td: Any) -> list[dict[str, str]]:
     """All validation problems of a TD (enriched or not); empty when valid."""
     if not isinstance(td, dict):
         return [{"field": "$", "description": f"a TD must be a JSON object, not {_json_type(td)}"}]
+    if json_depth(td, MAX_TD_DEPTH) > MAX_TD_DEPTH:  # before the (recursive) schema validators
+        return [{"field": "$", "description": f"a TD may nest objects/arrays at most {MAX_TD_DEPTH} "
+                                              "levels deep (max_depth)"}]
     problems = [] if _fast_td_validator().is_valid(td) else _schema_problems(_td_validator(), td)
     problems += _schema_problems(_registration_validator(), td)
     td_id = td.get("id")
@@ -121,8 +169,13 @@ def td_problems(td: Any) -> list[dict[str, str]]:
                 problems.append({"field": f"$.registration.{key}",
                                  "description": f"{reg[key]!r} is not an RFC 3339 date-time"})
         ttl = reg.get("ttl")
-        if isinstance(ttl, int | float) and not isinstance(ttl, bool) and ttl <= 0:
-            problems.append({"field": "$.registration.ttl", "description": "ttl must be positive"})
+        if isinstance(ttl, int | float) and not isinstance(ttl, bool):
+            if ttl <= 0:
+                problems.append({"field": "$.registration.ttl", "description": "ttl must be positive"})
+            elif not ttl <= MAX_TTL_S:
+                problems.append({"field": "$.registration.ttl",
+                                 "description": f"ttl must be at most {MAX_TTL_S} s (ten years), "
+                                                f"not {repr(ttl):.30}"})
     return problems[:_MAX_ERRORS]
 
 
@@ -130,7 +183,8 @@ def check_td(td: Any) -> dict[str, Any]:
     problems = td_problems(td)
     if problems:
         raise ValidationFailed(problems)
-    return td
+    valid: dict[str, Any] = td
+    return valid
 
 
 def _json_type(value: Any) -> str:
@@ -142,6 +196,13 @@ def _no_constants(name: str) -> Any:
     raise ValueError(f"{name} is not valid JSON")
 
 
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"the number {text[:40]} is out of range (not a finite double)")
+    return value
+
+
 def parse_json_body(body: bytes) -> Any:
     """Strict JSON (no NaN/Infinity), or a 400 that says where it broke."""
     try:
@@ -151,8 +212,11 @@ def parse_json_body(body: bytes) -> Any:
     if not text.strip():
         raise BadRequest("The body is empty; a JSON document was expected")
     try:
-        return json.loads(text, parse_constant=_no_constants)
+        return json.loads(text, parse_constant=_no_constants, parse_float=_finite)
     except json.JSONDecodeError as e:
         raise BadRequest(f"Invalid JSON: {e.msg} at line {e.lineno} column {e.colno}") from None
-    except (ValueError, RecursionError) as e:
+    except RecursionError:
+        raise BadRequest(f"The body nests objects/arrays far deeper than the {MAX_TD_DEPTH} levels a TD may "
+                         "have (the directory's max_depth)") from None
+    except ValueError as e:
         raise BadRequest(f"Invalid JSON: {e}") from None

@@ -1,50 +1,50 @@
 """What the history commands share: which database (``--database``, else ``--config``'s, else the
-default) and how a ``--from``/``--to`` range is read."""
+default) and how a ``--from``/``--to`` range is read.
+
+Contract: the history commands only *read*: ``open_reader`` never creates a
+file, never migrates, and refuses (``HistoryError``) a missing, empty, foreign,
+newer or corrupted database. Their errors are ``WottHubError``s, which end the
+command with one line and an exit code (``wott_hub.cli``, one place for every command).
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import typer
+from wott_hub.errors import InvalidInput
+
+if TYPE_CHECKING:  # imported inside the functions: --help stays fast
+    from wott_hub.history.reader import HistoryReader
+
+__all__ = ["open_reader", "resolve_database", "time_range"]
 
 
 def resolve_database(database: str | None, config: Path | None) -> str:
     if database:
         return database
-    from wott_hub.config import ConfigError, HubConfig
+    from wott_hub.config import HubConfig
 
     if config is not None:
-        try:
-            return HubConfig.load(config).database
-        except ConfigError as e:
-            typer.echo(f"error: {e}", err=True)
-            raise typer.Exit(2) from None
+        return HubConfig.load(config).database
     return HubConfig().database
 
 
-def open_reader(database: str):
-    """A HistoryReader on an existing, up-to-date database (never creates one)."""
-    from wott_hub.history import HistoryError, HistoryReader, create_engine, database_url, upgrade
+def open_reader(database: str) -> HistoryReader:
+    """A HistoryReader on an existing history database (never creates or migrates one)."""
+    from wott_hub.history.db import open_existing
+    from wott_hub.history.reader import HistoryReader
 
-    url = database_url(database)
-    if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).exists():
-        typer.echo(f"error: no history database at {url.removeprefix('sqlite:///')}", err=True)
-        raise typer.Exit(1)
-    engine = create_engine(url)
-    try:
-        upgrade(engine)
-    except HistoryError as e:
-        typer.echo(f"error: {e}", err=True)
-        raise typer.Exit(1) from None
-    return HistoryReader(engine)
+    return HistoryReader(open_existing(database))
 
 
 def time_range(t_from: str | None, t_to: str | None) -> tuple[int | None, int | None]:
-    """``--from``/``--to`` as ns (None = open end); exit 2 with the parser's message if unreadable."""
+    """``--from``/``--to`` as ns (None = open end); InvalidInput if unreadable, out of range or
+    reversed."""
     from wott_hub.history import parse_time
 
-    try:
-        return (parse_time(t_from) if t_from else None, parse_time(t_to) if t_to else None)
-    except ValueError as e:
-        typer.echo(f"error: {e}", err=True)
-        raise typer.Exit(2) from None
+    lo = parse_time(t_from) if t_from else None
+    hi = parse_time(t_to) if t_to else None
+    if lo is not None and hi is not None and lo > hi:
+        raise InvalidInput(f"--from {t_from!r} is after --to {t_to!r}: nothing can be in that range")
+    return lo, hi

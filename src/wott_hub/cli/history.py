@@ -1,4 +1,4 @@
-"""``wott-hub history``: what is recorded, and export a range as JSON Lines."""
+"""``wott-hub history``: what is recorded, and export a range as JSON Lines or MCAP."""
 
 from __future__ import annotations
 
@@ -37,7 +37,8 @@ def list_history(database: str = _DB, config: Path = _CFG,
     for col in ("device", "family", "events", "from", "to", "duration", "seq"):
         table.add_column(col, justify="right" if col in ("events", "duration") else "left")
     for t in things:
-        dur = f"{(t.last_t_ns - t.first_t_ns) / 1e9:.1f} s" if t.count else "-"
+        first, last = t.first_t_ns, t.last_t_ns  # None exactly when count is 0
+        dur = f"{(last - first) / 1e9:.1f} s" if first is not None and last is not None else "-"
         seqs = f"{t.first_seq}..{t.last_seq}" if t.count else "-"
         table.add_row(t.id, t.family, str(t.count), format_ns(t.first_t_ns), format_ns(t.last_t_ns),
                       dur, seqs)
@@ -46,25 +47,84 @@ def list_history(database: str = _DB, config: Path = _CFG,
 
 @app.command()
 def export(
-    device: str = typer.Option(..., "--device", help="Device id (see `wott-hub history list`)."),
+    device: list[str] = typer.Option(..., "--device", help="Device id (see `wott-hub history list`); "
+                                     "repeatable: MCAP puts several devices on one time base."),
     t_from: str = typer.Option(None, "--from", help="Start: ISO 8601 (local unless Z), -10m, seconds."),
     t_to: str = typer.Option(None, "--to", help="End, same forms as --from."),
     name: list[str] = typer.Option(None, "--name", help="Only these affordances (repeatable)."),
-    output: Path = typer.Option(None, "--output", "-o", help="File to write (default: standard output)."),
+    output: Path = typer.Option(None, "--output", "-o", help="File to write (default: standard output; "
+                                "required for mcap)."),
+    fmt: str = typer.Option("jsonl", "--format", help="jsonl (one record per line) or mcap (Foxglove, "
+                            "rosbag2; docs/history.md)."),
+    scene: bool = typer.Option(True, "--scene/--no-scene", help="mcap: Foxglove scene channels (mesh, "
+                               "deformation)."),
+    scene_hz: float = typer.Option(30.0, "--scene-hz", help="mcap: deformation scenes per second at most."),
     database: str = _DB,
     config: Path = _CFG,
 ) -> None:
-    """Write a device's records in a time range as JSON Lines (one record per line, in order)."""
-    from wott_hub.history import export_jsonl
-
-    lo, hi = time_range(t_from, t_to)
-    reader = open_reader(resolve_database(database, config))
-    if reader.key(device) is None:
-        typer.echo(f"error: no recorded device {device!r}", err=True)
-        raise typer.Exit(1)
-    if output is None:
-        n = export_jsonl(reader, sys.stdout, device, t_from_ns=lo, t_to_ns=hi, names=name or None)
-    else:
-        with output.open("w") as f:
-            n = export_jsonl(reader, f, device, t_from_ns=lo, t_to_ns=hi, names=name or None)
+    """Write devices' records in a time range as JSON Lines (in order) or as an MCAP file."""
+    n = _export(device, t_from, t_to, name, output, database, config, fmt=fmt, scene=scene, scene_hz=scene_hz)
     typer.echo(f"{n} records", err=True)
+
+
+def _export(devices: list[str] | str, t_from: str | None, t_to: str | None, name: list[str] | None,
+            output: Path | None, database: str | None, config: Path | None, *, fmt: str = "jsonl",
+            scene: bool = True, scene_hz: float = 30.0) -> int:
+    import math
+
+    from wott_hub.errors import InvalidInput, NotFound
+    from wott_hub.history.export import export_jsonl
+
+    devices = [devices] if isinstance(devices, str) else list(devices)
+    if fmt not in ("jsonl", "mcap"):
+        raise InvalidInput(f"--format {fmt!r}: expected jsonl or mcap")
+    if fmt == "mcap" and output is None:
+        raise InvalidInput("--output is required with --format mcap (a binary file, not for a terminal)")
+    if not (math.isfinite(scene_hz) and scene_hz > 0):
+        raise InvalidInput(f"--scene-hz must be a number > 0, got {scene_hz}")
+    lo, hi = time_range(t_from, t_to)
+    if output is not None and not output.parent.is_dir():
+        raise InvalidInput(f"--output {str(output)!r}: the folder {str(output.parent)!r} does not exist")
+    reader = open_reader(resolve_database(database, config))
+    for device in devices:
+        if reader.key(device) is None:
+            raise NotFound(f"no recorded device {device!r} (see `wott-hub history list`)")
+    if output is None:
+        return sum(export_jsonl(reader, sys.stdout, d, t_from_ns=lo, t_to_ns=hi, names=name or None)
+                   for d in devices)
+    try:
+        f = output.open("wb" if fmt == "mcap" else "w")
+    except OSError as e:
+        raise InvalidInput(f"--output {str(output)!r}: {e.strerror or e}") from None
+    with f:
+        if fmt == "mcap":
+            from wott_hub.history.mcap import export_mcap
+
+            return export_mcap(reader, f, devices, t_from_ns=lo, t_to_ns=hi, names=name or None,
+                               scene=scene, scene_hz=scene_hz).records
+        return sum(export_jsonl(reader, f, d, t_from_ns=lo, t_to_ns=hi, names=name or None)
+                   for d in devices)
+
+
+@app.command()
+def audit(
+    t_from: str = typer.Option(None, "--from", help="Start: ISO 8601 (local unless Z), -10m, seconds."),
+    who: str = typer.Option(None, "--who", help="Only this token's name ('-': no valid token)."),
+    limit: int = typer.Option(100, "--limit", min=1, max=1_000_000, help="The newest this many."),
+    as_json: bool = typer.Option(False, "--json", help="JSON Lines for scripts."),
+    database: str = _DB,
+    config: Path = _CFG,
+) -> None:
+    """The audit trail (docs/security.md): writes, actions and refused credentials, oldest first."""
+    from wott_hub.history import format_ns
+    from wott_hub.security import read_audit
+
+    lo, _ = time_range(t_from, None)
+    reader = open_reader(resolve_database(database, config))
+    for e in read_audit(reader.engine, limit=limit, who=who, since_ns=lo):
+        if as_json:
+            typer.echo(json.dumps({"t_ns": e.t_ns, "who": e.who, "action": e.action, "target": e.target,
+                                   "address": e.address, "status": e.status}))
+        else:
+            typer.echo(f"{format_ns(e.t_ns)}  {e.status}  {e.who:<20} {e.action:<7} {e.target}  "
+                       f"from {e.address}")

@@ -13,7 +13,11 @@ app = typer.Typer()
 
 @app.command()
 def replay(
-    device: str = typer.Option(..., "--device", help="Recorded device id (see `wott-hub history list`)."),
+    device: list[str] = typer.Option(..., "--device", help="Recorded device id (see `wott-hub history "
+                                     "list`); repeatable: the devices replay together on one time base."),
+    name: list[str] = typer.Option(None, "--name", help="Only these affordances (repeatable), e.g. "
+                                   "skinDeformedDetection."),
+    offset: float = typer.Option(0.0, "--offset", help="Start this many seconds into the range (seek)."),
     t_from: str = typer.Option(None, "--from", help="Start: ISO 8601 (local unless Z), -10m, seconds."),
     t_to: str = typer.Option(None, "--to", help="End, same forms as --from."),
     speed: float = typer.Option(1.0, help="Time scale: 2 plays twice as fast; 0 as fast as possible."),
@@ -28,27 +32,32 @@ def replay(
                                 help="Hub config naming the database."),
     as_json: bool = typer.Option(False, "--json", help="Print the replay Thing's URLs as one JSON line."),
 ) -> None:
-    """Serve a replay Thing ``replay-DEVICE`` (the device's TD) and re-emit its recorded events.
+    """Serve a replay Thing ``replay-DEVICE`` per device (its TD) and re-emit the recorded events.
 
     Subscribers get the recorded payloads unchanged, in order, at the original
     pace divided by --speed, over SSE and WebSocket like a live device.
     """
     import asyncio
     import json
+    import math
     import signal
 
     from wott_hub.config import HubConfig
-    from wott_hub.drivers.base import DriverError
+    from wott_hub.errors import InvalidInput, WottHubError
+    from wott_hub.history.db import open_existing
     from wott_hub.hub import Hub
     from wott_hub.network import DirectoryConfig
 
     lo, hi = time_range(t_from, t_to)
-    if speed < 0:
-        typer.echo("error: --speed must be >= 0", err=True)
-        raise typer.Exit(2)
+    for opt, value in (("--speed", speed), ("--delay", delay), ("--linger", linger), ("--offset", offset)):
+        if not (math.isfinite(value) and value >= 0):
+            raise InvalidInput(f"{opt} must be a finite number >= 0, got {value}")
     db = resolve_database(database, config)
+    open_existing(db).dispose()  # exists, is a history database this wott-hub reads, not corrupted
     # no directory: the one in this database belongs to the hub that runs on it (one owner per tables)
-    cfg = HubConfig(name=f"replay of {device}", host=host, http_port=port, ws_port=ws_port, database=db,
+    devices = list(dict.fromkeys(device))
+    cfg = HubConfig(name=f"replay of {', '.join(devices)}", host=host, http_port=port, ws_port=ws_port,
+                    database=db,
                     directory=DirectoryConfig(enabled=False))
 
     async def main() -> int:
@@ -59,19 +68,21 @@ def replay(
             loop_.add_signal_handler(sig, stop.set)
         await hub.start()
         try:
-            rt = await hub.add_replay(device, t_from_ns=lo, t_to_ns=hi, speed=speed, loop=loop)
-        except DriverError as e:
+            rt = await hub.add_replay(devices[0], t_from_ns=lo, t_to_ns=hi, speed=speed, loop=loop,
+                                      names=name or None, offset_s=offset, with_devices=devices[1:])
+        except WottHubError:  # no such recorded device: reported by the CLI, once the hub is down
             await hub.stop()
-            typer.echo(f"error: {e}", err=True)
-            return 1
+            raise
         url = hub.td_url(rt.id)
         if as_json:
             typer.echo(json.dumps({"thing": rt.id, "td": url, "events": f"{url}/events",
-                                   "websocket": hub.ws_url, "speed": speed, "loop": loop}))
+                                   "websocket": hub.ws_url, "speed": speed, "loop": loop,
+                                   "things": {g.id: hub.td_url(g.id) for g in rt.group}}))
         else:
-            typer.echo(f"replaying {device!r} as {rt.id!r} at {speed:g}x{' (loop)' if loop else ''}")
-            typer.echo(f"  TD   {url}")
-            typer.echo(f"  SSE  {url}/events")
+            for g in rt.group:
+                typer.echo(f"replaying {g.source!r} as {g.id!r} at {speed:g}x{' (loop)' if loop else ''}")
+                typer.echo(f"  TD   {hub.td_url(g.id)}")
+                typer.echo(f"  SSE  {hub.td_url(g.id)}/events")
         try:
             await asyncio.wait_for(stop.wait(), delay)
         except TimeoutError:
@@ -88,4 +99,5 @@ def replay(
         await hub.stop()
         return 0
 
-    raise typer.Exit(asyncio.run(main()))
+    code = asyncio.run(main())
+    raise typer.Exit(code)

@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import typer
+
+if TYPE_CHECKING:
+    from wott_hub.config import HubConfig
+    from wott_hub.hub import Hub
 
 _T0 = time.monotonic()
 
@@ -23,6 +28,14 @@ def run(
     no_history: bool = typer.Option(False, "--no-history", help="Do not record events."),
     as_json: bool = typer.Option(False, "--json", help="Print where everything is as one JSON line."),
     log_level: str = typer.Option("warning", help="Logging level (debug, info, warning, error)."),
+    tokens: Path = typer.Option(None, "--tokens", dir_okay=False,
+                                help="File of hashed tokens (wott-hub tokens create --file); default: "
+                                     "[security] tokens_file."),
+    cert: Path = typer.Option(None, "--cert", exists=True, dir_okay=False,
+                              help="PEM certificate: serve https and wss."),
+    key: Path = typer.Option(None, "--key", exists=True, dir_okay=False, help="PEM private key of --cert."),
+    insecure: bool = typer.Option(False, "--insecure",
+                                  help="Serve everyone without credentials on a non-loopback address."),
 ) -> None:
     """Run the hub: one WoT servient for every device, SSE and WebSocket events, history.
 
@@ -33,23 +46,29 @@ def run(
     import json
     import logging
 
-    from wott_hub.config import ConfigError, HubConfig
+    from wott_hub.config import HubConfig, check_port
 
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    try:
-        cfg = HubConfig.load(config) if config else HubConfig.demo_config()
-    except ConfigError as e:
-        typer.echo(f"error: {e}", err=True)
-        raise typer.Exit(2) from None
-    changes = {k: v for k, v in {"host": host, "http_port": port, "ws_port": ws_port,
+    # a ConfigError (or a HistoryError when the hub starts) is reported by ``cli.main``: one line
+    check_port(port, "--port"), check_port(ws_port, "--ws-port")  # 70000 would wrap to 4464
+    cfg = HubConfig.load(config) if config else HubConfig.demo_config()
+    changes: dict[str, Any] = {k: v for k, v in {"host": host, "http_port": port, "ws_port": ws_port,
                                  "database": database}.items() if v is not None}
     if no_history:
         changes["history"] = False
-    cfg = dataclasses.replace(cfg, **changes)
+    paths = {"tokens_file": tokens, "cert": cert, "key": key}
+    sec: dict[str, Any] = {k: str(v.resolve()) for k, v in paths.items() if v is not None}
+    if insecure:
+        sec["insecure"] = True
+    if sec:  # docs/security.md
+        changes["security"] = dataclasses.replace(cfg.security, **sec)
+    cfg = dataclasses.replace(cfg, **changes)  # checked again, as a file's values are
 
     from wott_hub.hub import serve
 
-    def ready(hub) -> None:
+    _warn_failed_plugins()
+
+    def ready(hub: Hub) -> None:
         info = hub.describe()
         info["ready_s"] = round(time.monotonic() - _T0, 3)
         if as_json:
@@ -62,16 +81,17 @@ def run(
     except OSError as e:  # typically a port in use
         typer.echo(f"error: {e} (choose other ports with --port/--ws-port or in [hub])", err=True)
         raise typer.Exit(1) from None
-    except Exception as e:
-        from wott_hub.history.db import HistoryError
-
-        if isinstance(e, HistoryError):
-            typer.echo(f"error: {e}", err=True)
-            raise typer.Exit(1) from None
-        raise
 
 
-def _print(hub, info: dict, cfg) -> None:
+def _warn_failed_plugins() -> None:
+    """One line on stderr per installed plugin that could not be loaded (its families are missing)."""
+    from wott_hub.plugins import get_registry
+
+    for name, error in get_registry().failed_plugins().items():
+        typer.echo(f"warning: plugin {name!r} not loaded: {error}", err=True)
+
+
+def _print(hub: Hub, info: dict[str, Any], cfg: HubConfig) -> None:
     w = typer.echo
     what = "demo scene" if cfg.demo else cfg.source
     w(f"wott-hub {cfg.name!r} running ({what})")

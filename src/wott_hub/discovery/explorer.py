@@ -131,15 +131,16 @@ class Explorer:
         source = f"mdns:{rec.name}"
         kind = td_kind(td)
         if kind == "Directory" or rec.kind == "Directory":
-            base = td.get("base") if isinstance(td.get("base"), str) else rec.base_url
+            base = b if isinstance(b := td.get("base"), str) else rec.base_url
             self._service_dirs[rec.name] = base
             if self.follow_directories and td.get("id") not in self.own_ids:
                 self.add_directory(base)
             return
         if kind == "Link":
-            td, url = await self._follow_link(td, url)
-            if td is None:
+            linked, url = await self._follow_link(td, url)
+            if linked is None:
                 return
+            td = linked
         old_id = self._service_things.get(rec.name)
         thing_id = await self._merge(td, url, source)
         if thing_id is None:
@@ -235,7 +236,7 @@ class Explorer:
     # -- merging -------------------------------------------------------------------
     async def _merge(self, td: dict[str, Any], url: str, source: str) -> str | None:
         td = _consumed(td, url)
-        thing_id = td.get("id") if isinstance(td.get("id"), str) else url
+        thing_id = i if isinstance(i := td.get("id"), str) else url
         if thing_id in self.own_ids:
             return None
         async with self._lock:

@@ -6,6 +6,13 @@ owns its transport (camera, serial port, network) and keeps it alive: when the
 transport fails it reports ``disconnected`` with a reason, retries with
 backoff and resumes yielding; it never raises out of ``frames()`` for a
 transient fault. The hub stops a driver by ``close()``.
+
+The contract is explicit: what every driver has is on ``Driver`` (``prepare``
+included, with a default that does nothing, so the hub always awaits it); a
+capability only some drivers have is a ``runtime_checkable`` protocol here
+(``Retargetable``), declared by the driver class inheriting it and tested by
+the hub with ``isinstance``, never found by ``getattr`` probing: so a
+capability has one name, one signature and one place that documents it.
 """
 
 from __future__ import annotations
@@ -15,14 +22,12 @@ import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any, Protocol, runtime_checkable
 
+from wott_hub.errors import DriverError
 from wott_hub.tactile import DeviceDescription, TactileFrame
 
-__all__ = ["Driver", "DriverError", "Health", "HealthStatus"]
-
-
-class DriverError(RuntimeError):
-    """A driver cannot start at all (bad config, model contract mismatch...)."""
+__all__ = ["Driver", "DriverError", "Health", "HealthStatus", "Recalibratable", "Retargetable", "Tareable"]
 
 
 class Health(StrEnum):
@@ -73,3 +78,47 @@ class Driver(abc.ABC):
     async def close(self) -> None:
         """Release the transport. Default: nothing to release."""
         return None
+
+
+@runtime_checkable
+class Retargetable(Protocol):
+    """A driver of a network device that can follow the device to a new address.
+
+    Discovery calls ``retarget(td)`` when a device it already serves shows up
+    again with a new Thing Description (same device, another host or port):
+    the driver switches its stream to the new forms and resumes without losing
+    its place. It runs on the event loop, so it must not block.
+    """
+
+    def retarget(self, td: dict[str, Any]) -> None:
+        """Use ``td`` (the device's current Thing Description) from now on."""
+
+
+@runtime_checkable
+class Tareable(Protocol):
+    """A driver that can take a new rest reference when asked (the device's ``tare`` action).
+
+    ``tare()`` makes what the skin shows now its rest state: a vision driver
+    takes its next frame as the new marker reference, a taxel array zeroes its
+    offsets at the current readings. It runs on the event loop, so it must not
+    block: it may only request the change, done when the next frame is read.
+    Returns a short sentence saying what was done (shown to the user, recorded).
+    """
+
+    def tare(self) -> str:
+        """Take a new rest reference (now, or from the next frame)."""
+
+
+@runtime_checkable
+class Recalibratable(Protocol):
+    """A driver that can redo its calibration while running (the device's ``recalibrate`` action).
+
+    More than a tare: what the driver learnt about its device at start is
+    found again (a vision pad re-detects its marker grid, forgetting markers it
+    had marked unavailable, and restarts tracking from it). Same rules as
+    ``tare``: non-blocking, a request carried out on the next frame, a short
+    sentence back.
+    """
+
+    def recalibrate(self) -> str:
+        """Redo the calibration from the next frame (the skin at rest)."""

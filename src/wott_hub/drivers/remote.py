@@ -47,7 +47,7 @@ from wott_hub.tactile import (
 )
 
 from .backoff import Backoff
-from .base import Driver, DriverError, Health
+from .base import Driver, DriverError, Health, Retargetable
 
 __all__ = ["EVENT", "FAMILY", "SKIN", "RemoteWoTDriver", "event_url", "property_url", "tactile_affordances"]
 
@@ -115,9 +115,8 @@ def tactile_affordances(td: dict[str, Any], td_url: str | None = None) -> dict[s
     lacks one of them or offers no form this driver can use (HTTP GET, SSE)."""
     urls = {name: property_url(td, name, td_url) for name in SKIN}
     urls[EVENT] = event_url(td, EVENT, td_url)
-    if any(u is None for u in urls.values()):
-        return None
-    return urls  # type: ignore[return-value]
+    found = {name: url for name, url in urls.items() if url is not None}
+    return found if len(found) == len(urls) else None
 
 
 # --- from property values to a DeviceDescription ----------------------------------------------
@@ -194,19 +193,20 @@ def re_exposed_epsilon(td: dict[str, Any], override: float | None = None) -> flo
 
 # --- the driver ----------------------------------------------------------------------------
 
-class RemoteWoTDriver(Driver):
+class RemoteWoTDriver(Driver, Retargetable):
     """``td`` (a Tactile TD) or ``url`` (where to fetch it) says where the device is."""
 
     def __init__(self, device_id: str, *, td: dict[str, Any] | None = None, url: str | None = None,
                  title: str | None = None, timeout_s: float = 5.0, idle_timeout_s: float = 60.0,
                  epsilon_mm: float | None = None, thickness_mm: float = 3.0,
-                 backoff: Backoff | None = None, queue_size: int = 1024) -> None:
+                 backoff: Backoff | None = None, queue_size: int = 1024, token: str | None = None) -> None:
         if td is None and url is None:
             raise DriverError("needs the device's TD or its URL")
         super().__init__(None)  # type: ignore[arg-type]  # described by prepare()
         self.device_id = device_id
         self.td = td
         self.td_url = url
+        self._token = token  # sent as a bearer header on every request (TD, properties, SSE)
         self.title = title
         self.timeout_s = timeout_s
         self.idle_timeout_s = idle_timeout_s
@@ -219,7 +219,7 @@ class RemoteWoTDriver(Driver):
         self.bad_packets = 0
         self.connects = 0
         self._index: dict[int, int] | None = None
-        self._inward: np.ndarray | None = None
+        self._inward: np.ndarray = np.zeros((0, 3))  # per node, set by prepare()
         self._last_t = 0
         self._queue: asyncio.Queue[TactileFrame | None] | None = None
         self._reader: asyncio.Task[None] | None = None
@@ -230,8 +230,9 @@ class RemoteWoTDriver(Driver):
     def _client(self) -> Any:
         import httpx
 
+        auth = {"Authorization": f"Bearer {self._token}"} if self._token else {}
         return httpx.AsyncClient(timeout=httpx.Timeout(self.timeout_s, read=self.idle_timeout_s),
-                                 follow_redirects=True)
+                                 follow_redirects=True, headers=auth)
 
     async def prepare(self) -> None:
         import httpx
@@ -258,7 +259,7 @@ class RemoteWoTDriver(Driver):
                         with contextlib.suppress(httpx.HTTPError, ValueError, DriverError):
                             values[name] = await self._read(client, name)
         except (httpx.HTTPError, ValueError) as e:  # unreachable, an HTTP error, not JSON
-            raise DriverError(f"cannot read the device at {self.td_url or self.td.get('base')}: "
+            raise DriverError(f"cannot read the device at {self.td_url or (self.td or {}).get('base')}: "
                               f"{type(e).__name__}: {e}") from None
         td = self.td
         mesh, self._index = _mesh(values["skinNodes"], values["skinCells"], self.device_id)
@@ -273,8 +274,15 @@ class RemoteWoTDriver(Driver):
         )
         self._inward = -mesh.normals
 
+    def _known_td(self) -> dict[str, Any]:
+        if self.td is None:
+            raise DriverError(f"device {self.device_id!r}: its TD is not known (prepare() was not called)")
+        return self.td
+
     async def _read(self, client: Any, name: str) -> Any:
-        url = property_url(self.td, name, self.td_url)
+        url = property_url(self._known_td(), name, self.td_url)
+        if url is None:
+            raise DriverError(f"the TD has no HTTP readproperty form for {name}")
         resp = await client.get(url, headers={"Accept": "application/json"})
         resp.raise_for_status()
         return resp.json()
@@ -307,9 +315,15 @@ class RemoteWoTDriver(Driver):
         import httpx
         from httpx_sse import SSEError, aconnect_sse
 
+        queue = self._queue
+        if queue is None:  # started by frames() only, which made the queue
+            return
         async with self._client() as client:
             while not self._closed:
-                url = event_url(self.td, EVENT, self.td_url)
+                url = event_url(self._known_td(), EVENT, self.td_url)
+                if url is None:  # retargeted to a TD without the event's SSE form: nothing to follow
+                    self.set_health(Health.disconnected, f"the TD has no SSE form for {EVENT}")
+                    return
                 headers = {"Last-Event-ID": self.last_event_id} if self.last_event_id else {}
                 if self.health().state is not Health.ok or self.connects == 0:
                     self.set_health(Health.disconnected, f"connecting to {url}")
@@ -327,7 +341,7 @@ class RemoteWoTDriver(Driver):
                                 continue
                             frame = self._packet_frame(sse.data)
                             if frame is not None:
-                                await self._queue.put(frame)
+                                await queue.put(frame)
                     reason = "the device ended its event stream"
                 except httpx.ReadTimeout:
                     quiet, reason = True, f"no data for {self.idle_timeout_s:g} s"

@@ -25,12 +25,12 @@ import numpy as np
 from wott_hub.sim.scene import Scene
 from wott_hub.tactile import DeviceDescription, TactileFrame
 
-from .base import Driver, DriverError, Health
+from .base import Driver, DriverError, Health, Tareable
 
 __all__ = ["SceneDriver"]
 
 
-class SceneDriver(Driver):
+class SceneDriver(Driver, Tareable):
     """Yields ``TactileFrame``s of ``scene`` on ``description.mesh`` at ``rate_hz``.
 
     ``realtime=False`` yields frames as fast as the consumer takes them, with
@@ -56,6 +56,7 @@ class SceneDriver(Driver):
         self.max_frames = max_frames
         self.frames_yielded = 0
         self.frames_skipped = 0
+        self.tares = 0
         self._closed = asyncio.Event()
 
 
@@ -95,6 +96,11 @@ class SceneDriver(Driver):
             k += 1
             self.frames_yielded += 1
             yield frame
+
+    def tare(self) -> str:
+        """A scene is ground truth, at rest when no step touches it: nothing to zero; the tare is recorded."""
+        self.tares += 1
+        return "a scripted scene has no rest offset: nothing to zero"
 
     async def close(self) -> None:
         self._closed.set()

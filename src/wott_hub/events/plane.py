@@ -11,6 +11,16 @@ clients but never committed show up as one gap, not as different events with
 old numbers. For a Thing that is not recorded the sequence starts at the
 current time in microseconds, which a restart never goes below.
 
+Durability (``durability``, the ``[history] durability`` setting):
+- ``"fast"`` (the default): a record goes to subscribers at once and to history
+  in the next batch (~50 ms later). A crash (SIGKILL, power) in between loses
+  from history records some subscriber already saw; latency is the lowest.
+- ``"committed"``: a recorded Thing's records are held on the plane until the
+  writer's ``on_commit`` watermark passes them, then delivered: anything a
+  subscriber ever saw is in history, and a record the database refused is never
+  delivered. The cost is the batch interval plus a commit added to every
+  record's latency. Things that are not recorded are delivered at once in both.
+
 Resume (SSE ``Last-Event-ID``): records after the client's last id are served
 from the in-memory ring of recent records when they are still there, else from
 history (waiting, if needed, until the writer has committed them), then the
@@ -28,15 +38,24 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from wott_hub.errors import HistoryError
+
 from .record import Record
 from .subscriber import Interest, Subscriber
 
-__all__ = ["EventPlane", "HistorySink", "HistorySource", "Stream", "Tap"]
+__all__ = ["DURABILITY", "EventPlane", "HistorySink", "HistorySource", "Stream", "Tap"]
+
+DURABILITY = ("fast", "committed")
 
 log = logging.getLogger(__name__)
 
 
 class HistorySink(Protocol):
+    """The history writer. ``failed_seqs``: per Thing, the seqs it gave up on (refused by the
+    database, or dropped); the plane discards each once its watermark has passed."""
+
+    failed_seqs: dict[str, set[int]]
+
     def submit(self, rec: Record) -> None: ...
 
 
@@ -52,6 +71,12 @@ class Tap(Protocol):
 
 
 class HistorySource(Protocol):
+    """History read back for resumes. ``failure``: why it cannot be trusted now (e.g. the
+    database is corrupted), else "" (then a resume that needs it is refused up front)."""
+
+    @property
+    def failure(self) -> str: ...
+
     async def fetch(self, thing: str, after: int, upto: int, interest: Interest,
                     limit: int) -> tuple[list[Record], int]:
         """Records of ``thing`` with after < seq <= upto matching ``interest``, ascending, at most
@@ -68,10 +93,11 @@ class Stream:
     seq: int = 0
     committed: int = 0  # everything <= this is in history (or will never be)
     ring: deque[Record] = field(default_factory=deque)
+    held: deque[Record] = field(default_factory=deque)  # durability "committed": not yet delivered
     subs: dict[Interest, list[Subscriber]] = field(default_factory=dict)
     taps: list[Tap] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=lambda: defaultdict(int))
-    _commit_waiters: list[tuple[int, asyncio.Future]] = field(default_factory=list)
+    _commit_waiters: list[tuple[int, asyncio.Future[None]]] = field(default_factory=list)
 
     def interested(self, kind: int, name: str) -> bool:
         return bool(self.subs.get((kind, name)) or self.subs.get((kind, None)))
@@ -81,7 +107,12 @@ class EventPlane:
     fetch_chunk = 5000  # records per history read of a resume backlog
     commit_wait_s = 10.0  # how long a resume waits for history to commit its backlog
 
-    def __init__(self, *, ring_size: int = 4096, max_pending: int = 100_000) -> None:
+    max_held = 1_000_000  # per Thing, "committed" mode: beyond, the oldest held are not delivered live
+
+    def __init__(self, *, ring_size: int = 4096, max_pending: int = 100_000,
+                 durability: str = "fast") -> None:
+        self.set_durability(durability)
+        self.held_overflow = 0
         self.ring_size = ring_size
         self.ring_hard_cap = max(ring_size * 16, 65536)
         self.max_pending = max_pending
@@ -91,6 +122,13 @@ class EventPlane:
         self.streams: dict[str, Stream] = {}
         self.overflow_disconnects = 0
         self.trace = False  # benchmarks: stamp perf_counter_ns per stage
+
+    def set_durability(self, durability: str) -> None:
+        """``"fast"`` or ``"committed"`` (see the module docstring); set before records flow."""
+        if durability not in DURABILITY:
+            raise ValueError(f"durability must be one of {', '.join(DURABILITY)}, got {durability!r}")
+        self.durability = durability
+        self.hold = durability == "committed"
 
     # --- Things -----------------------------------------------------------------
 
@@ -136,18 +174,28 @@ class EventPlane:
             self._trim(st)
         if st.record and self.history_sink is not None:
             self.history_sink.submit(rec)
+            if self.hold:  # delivered by on_committed once the writer has committed it
+                st.held.append(rec)
+                if len(st.held) > self.max_held:
+                    st.held.popleft()
+                    self.held_overflow += 1
+                return rec
         elif not st.record:
             st.committed = rec.seq
+        self._deliver(st, rec)
+        return rec
+
+    @staticmethod
+    def _deliver(st: Stream, rec: Record) -> None:
         subs = st.subs
         if subs:
-            for s in subs.get((kind, name), ()):
+            for s in subs.get((rec.kind, rec.name), ()):
                 s.push(rec)
-            for s in subs.get((kind, None), ()):
+            for s in subs.get((rec.kind, None), ()):
                 s.push(rec)
         for tap in st.taps:
             if tap.active:
                 tap(rec)
-        return rec
 
     def _trim(self, st: Stream) -> None:
         ring, committed = st.ring, st.committed
@@ -156,11 +204,22 @@ class EventPlane:
 
     def on_committed(self, watermarks: dict[str, int]) -> None:
         """History has written (or given up on) every record up to these seqs."""
+        failed_all = getattr(self.history_sink, "failed_seqs", None)
         for thing, seq in watermarks.items():
             st = self.streams.get(thing)
             if st is None or seq <= st.committed:
                 continue
             st.committed = seq
+            failed = failed_all.get(thing) if failed_all else None
+            if st.held:
+                held = st.held
+                while held and held[0].seq <= seq:
+                    rec = held.popleft()
+                    if not (failed and rec.seq in failed):
+                        self._deliver(st, rec)
+            if failed:
+                for s in [s for s in list(failed) if s <= seq]:
+                    failed.discard(s)
             if len(st.ring) > self.ring_size:
                 self._trim(st)
             if st._commit_waiters:
@@ -191,17 +250,27 @@ class EventPlane:
 
         ``after`` (a Last-Event-ID) asks for every matching record with a greater
         seq first; None means live records only.
+
+        A resume that needs history while history is known to be broken raises
+        ``HistoryError`` before anything is sent (an HTTP route answers 503): never
+        a stream that silently lacks the records asked for.
         """
         st = self.stream(thing)
+        # in "committed" mode a subscriber sees only committed records: held ones come live
+        head = min(st.seq, st.committed) if self.hold and st.record else st.seq
+        if after is not None and 0 <= after < head and st.record and self.history_source is not None:
+            ring_first = st.ring[0].seq if st.ring else head + 1
+            failure = getattr(self.history_source, "failure", "")
+            if after + 1 < ring_first and failure:
+                raise HistoryError(f"cannot resume {thing!r} after {after}: {failure}")
         sub = Subscriber(thing, interest, self.max_pending, self._unsubscribe)
         st.subs.setdefault(interest, []).append(sub)
-        head = st.seq
         if after is None or after >= head:
             sub.last_seq = head  # live only (an id from the future: a reset database)
             return sub
         after = max(after, 0)
         sub.last_seq = after
-        snapshot = [r for r in st.ring if r.seq > after and sub.wants(r)]
+        snapshot = [r for r in st.ring if after < r.seq <= head and sub.wants(r)]
         ring_first = st.ring[0].seq if st.ring else head + 1
         sub._backfill = self._backfill(st, sub, after, ring_first, snapshot)
         return sub
@@ -237,7 +306,7 @@ class EventPlane:
 
     # --- introspection ------------------------------------------------------------
 
-    def counters(self) -> dict[str, dict]:
+    def counters(self) -> dict[str, dict[str, object]]:
         return {
             thing: {
                 "seq": st.seq,

@@ -1,13 +1,20 @@
 """One entry of the event plane: an event or a property change of one Thing.
 
 The payload is JSON-encoded once, when the record is made; history stores that
-text, SSE and WebSocket subscribers send it as is. The SSE frame is built the
+text, SSE and WebSocket subscribers send it as is. Each SSE frame is built the
 first time an SSE subscriber needs it and then shared by all of them.
+
+SSE framing: a stream of one affordance (one event, one observed property)
+carries unnamed messages (``id:`` + ``data:``), because the WoT clients users
+have (node-wot, any page using ``EventSource.onmessage``) only see those; a
+stream multiplexing several affordances (``subscribeallevents``) names each
+message with ``event: <affordance>`` so that its reader can tell them apart.
 """
 
 from __future__ import annotations
 
 import json
+from typing import Any
 
 __all__ = ["KIND_EVENT", "KIND_NAMES", "KIND_PROPERTY", "Record", "encode"]
 
@@ -16,9 +23,12 @@ KIND_PROPERTY = 1
 KIND_NAMES = {KIND_EVENT: "event", KIND_PROPERTY: "property"}
 """A kind's name in the export/JSON Lines form of a record."""
 
-_encoder = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, check_circular=False)
+_encoder = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, check_circular=False,
+                            allow_nan=False)
 encode = _encoder.encode
-"""Compact JSON text of a payload (the one encoding every consumer shares)."""
+"""Compact JSON text of a payload (the one encoding every consumer shares). NaN and infinities
+raise ValueError: JSON has no such numbers, and a record carrying them would be invalid JSON in
+SSE, WebSocket and history alike (the frame pump counts it as a frame error)."""
 
 
 class Record:
@@ -28,7 +38,7 @@ class Record:
     perf_counter_ns stamps of the pipeline stages.
     """
 
-    __slots__ = ("_sse", "data", "kind", "name", "seq", "t_ns", "thing", "trace")
+    __slots__ = ("_sse", "_sse_named", "data", "kind", "name", "seq", "t_ns", "thing", "trace")
 
     def __init__(self, thing: str, seq: int, kind: int, name: str, t_ns: int, data: str,
                  trace: dict[str, int] | None = None) -> None:
@@ -40,16 +50,24 @@ class Record:
         self.data = data
         self.trace = trace
         self._sse: bytes | None = None
+        self._sse_named: bytes | None = None
 
-    def sse(self) -> bytes:
-        """The Server-Sent Events frame: ``id`` is the sequence number (resume key)."""
+    def sse(self, named: bool = False) -> bytes:
+        """The Server-Sent Events frame: ``id`` is the sequence number (resume key); ``named``
+        adds ``event: <name>``, for streams that carry several affordances."""
+        # JSON text has no raw newlines (json escapes them), so one data line is enough
+        if named:
+            frame = self._sse_named
+            if frame is None:
+                frame = f"id: {self.seq}\nevent: {self.name}\ndata: {self.data}\n\n".encode()
+                self._sse_named = frame
+            return frame
         frame = self._sse
         if frame is None:
-            # JSON text has no raw newlines (json escapes them), so one data line is enough
-            frame = self._sse = f"id: {self.seq}\nevent: {self.name}\ndata: {self.data}\n\n".encode()
+            frame = self._sse = f"id: {self.seq}\ndata: {self.data}\n\n".encode()
         return frame
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """The export/JSON Lines form of the record."""
         return {"thing": self.thing, "seq": self.seq, "t_ns": self.t_ns,
                 "kind": KIND_NAMES.get(self.kind, "event"),

@@ -33,7 +33,7 @@ class Subscriber:
         self.overflowed = False
         self.last_seq = -1  # the last seq handed to the consumer (de-duplicates backfill vs live)
         self.gap: tuple[int, int] | None = None  # (after, first available) when history cannot fill
-        self._wake: asyncio.Future | None = None
+        self._wake: asyncio.Future[None] | None = None
         self._backfill: AsyncIterator[list[Record]] | None = None
         self._on_close = on_close
 

@@ -10,7 +10,9 @@ import importlib
 from typing import Any
 
 _WHERE = {
-    "HistoryError": "db", "create_engine": "db", "database_url": "db", "upgrade": "db",
+    "HistoryError": "db", "check_integrity": "db", "create_engine": "db", "database_url": "db",
+    "open_existing": "db", "upgrade": "db",
+    "DEFAULT_HUB_ID": "lease", "Lease": "lease",
     "export_jsonl": "export",
     "Base": "models", "EventRow": "models", "ThingRow": "models",
     "HistoryReader": "reader", "ThingSummary": "reader",

@@ -1,10 +1,16 @@
 """Open the history database and bring its schema up to date.
 
 A plain path means SQLite; anything with ``://`` is an SQLAlchemy URL (e.g.
-``postgresql+psycopg://user@host/db``). SQLite runs in WAL mode with
+``postgresql+psycopg://user@host/db``; a bare ``postgresql://`` means the same, psycopg 3
+being the driver installed with wott-hub; docs/postgres.md). SQLite runs in WAL mode with
 ``synchronous=NORMAL``: readers (SSE resume, export) never block the writer,
 and a committed transaction survives a crash of the hub process (SIGKILL);
 only a power loss can take back the last commits.
+
+Contract: everything that goes wrong opening a database (an unknown URL scheme,
+a missing driver, a schema newer than this wott-hub, a file that is not a
+history database, a corrupted one) is a ``wott_hub.errors.HistoryError`` whose
+message names the database: one line on the CLI, health "degraded" in a hub.
 """
 
 from __future__ import annotations
@@ -12,29 +18,41 @@ from __future__ import annotations
 import logging
 from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-__all__ = ["HistoryError", "create_engine", "current_revision", "database_url", "migrations_dir", "upgrade"]
+from wott_hub.errors import HistoryError
+
+if TYPE_CHECKING:
+    from alembic.config import Config
+
+__all__ = ["HistoryError", "check_integrity", "create_engine", "current_revision", "database_url",
+           "describe", "migrations_dir", "open_existing", "upgrade"]
 
 log = logging.getLogger(__name__)
 
-
-class HistoryError(RuntimeError):
-    """The history database cannot be opened or upgraded."""
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_MIGRATION_LOCK = 0x776F7474  # "wott": the PostgreSQL advisory lock key held while migrating
 
 
 def database_url(value: str | Path) -> str:
     """An SQLAlchemy URL from a config value: a file path or a URL."""
     text = str(value)
+    for bare in ("postgresql://", "postgres://"):  # psycopg 3 is the driver installed with wott-hub
+        if text.startswith(bare):
+            return "postgresql+psycopg://" + text.removeprefix(bare)
     if "://" in text:
         return text
     return f"sqlite:///{Path(text).expanduser().resolve()}"
 
 
-def _sqlite_pragmas(dbapi_conn, _record) -> None:
+def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:
     cur = dbapi_conn.cursor()
+    # before any table exists, so that a new file is made with it: freed pages can then be given
+    # back to the file system (retention.py); an existing file gets it in migration 0006 (VACUUM)
+    cur.execute("PRAGMA auto_vacuum=INCREMENTAL")
     cur.execute("PRAGMA journal_mode=WAL")
     cur.execute("PRAGMA synchronous=NORMAL")
     cur.execute("PRAGMA busy_timeout=10000")
@@ -42,8 +60,25 @@ def _sqlite_pragmas(dbapi_conn, _record) -> None:
     cur.close()
 
 
+def describe(url: str | sa.URL) -> str:
+    """The database as a person would name it: the file of an SQLite URL, else the URL without
+    its password."""
+    text = str(url)
+    if text.startswith("sqlite:///"):
+        return text.removeprefix("sqlite:///")
+    try:
+        return sa.make_url(text).render_as_string(hide_password=True)
+    except sa.exc.ArgumentError:
+        return text
+
+
 def create_engine(url: str) -> Engine:
-    engine = sa.create_engine(url, future=True, pool_pre_ping=not url.startswith("sqlite"))
+    """An engine on ``url``; an unknown scheme or a driver that is not installed is a HistoryError."""
+    try:
+        engine = sa.create_engine(url, future=True, pool_pre_ping=not url.startswith("sqlite"))
+    except (sa.exc.ArgumentError, ImportError) as e:  # NoSuchModuleError is an ArgumentError
+        raise HistoryError(f"cannot use the history database {describe(url)!r}: {e} (a file path, or a "
+                           "URL such as postgresql+psycopg://user@host/db)") from None
     if engine.dialect.name == "sqlite":
         if url.startswith("sqlite:///") and url != "sqlite:///:memory:":
             Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
@@ -61,7 +96,7 @@ def migrations_dir() -> Path:
     raise HistoryError("the history migrations (migrations/env.py) are not installed")
 
 
-def _alembic_config():
+def _alembic_config() -> Config:
     from alembic.config import Config
 
     cfg = Config()
@@ -74,31 +109,141 @@ def current_revision(engine: Engine) -> str | None:
     try:
         with engine.connect() as conn:
             return conn.exec_driver_sql("SELECT version_num FROM alembic_version").scalar()
-    except sa.exc.DBAPIError:
+    except sa.exc.OperationalError as e:
+        if "no such table" in str(e) or "does not exist" in str(e):
+            return None
+        raise _read_error(engine, e) from None
+    except sa.exc.ProgrammingError:  # PostgreSQL: relation "alembic_version" does not exist
         return None
+    except sa.exc.DBAPIError as e:  # not a database, corrupted, unreachable
+        raise _read_error(engine, e) from None
+
+
+def _read_error(engine: Engine, e: Exception) -> HistoryError:
+    cause = getattr(e, "orig", None) or e
+    return HistoryError(f"cannot read the history database {describe(engine.url)!r}: {cause}")
+
+
+def _known_revisions() -> tuple[list[str], str]:
+    """Every revision of ``migrations/versions`` and the head (imports Alembic: ~0.5 s)."""
+    from alembic.script import ScriptDirectory
+
+    script = ScriptDirectory.from_config(_alembic_config())
+    return [rev.revision for rev in script.walk_revisions()], script.get_current_head() or ""
+
+
+def _check_known(engine: Engine, current: str | None) -> str:
+    """``current`` if this wott-hub knows it (head or older), else a HistoryError."""
+    known, head = _known_revisions()
+    if current is not None and current not in known:
+        raise HistoryError(f"the history database {describe(engine.url)!r} has schema revision {current!r}, "
+                           f"which this wott-hub does not know (its newest is {head!r}): it was written "
+                           "by a newer wott-hub; upgrade wott-hub to use it")
+    return head
 
 
 def upgrade(engine: Engine) -> str:
-    """Upgrade the schema to the newest revision; returns it. Cheap when already there."""
+    """Upgrade the schema to the newest revision; returns it. Cheap when already there.
+
+    A schema newer than this wott-hub knows is refused (never downgraded, never
+    half-migrated); so is a file that is not an SQLite database."""
     from .models import HEAD_REVISION
 
-    if current_revision(engine) == HEAD_REVISION:
+    _check_sqlite_file(engine, allow_empty=True)
+    current = current_revision(engine)
+    if current == HEAD_REVISION:
         return HEAD_REVISION
+    head = _check_known(engine, current)
     from alembic import command
     from alembic.runtime.migration import MigrationContext
-    from alembic.script import ScriptDirectory
 
     cfg = _alembic_config()
-    head = ScriptDirectory.from_config(cfg).get_current_head()
     try:
         with engine.connect() as conn:
+            if conn.dialect.name == "postgresql":
+                # hubs of a fleet starting together on one database: one migrates, the others
+                # wait here and then find it at head (released with the transaction)
+                conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_MIGRATION_LOCK})")
             current = MigrationContext.configure(conn).get_current_revision()
             if current == head:
+                conn.commit()
                 return head
             log.info("upgrading history database from %s to %s", current, head)
             cfg.attributes["connection"] = conn
             command.upgrade(cfg, "head")
             conn.commit()
     except sa.exc.SQLAlchemyError as e:
-        raise HistoryError(f"cannot open or upgrade the history database {engine.url!r}: {e}") from e
+        raise HistoryError(f"cannot open or upgrade the history database {describe(engine.url)!r}: "
+                           f"{getattr(e, 'orig', None) or e}") from None
+    except Exception as e:  # Alembic's own errors (CommandError, ...): one line, not a traceback
+        if isinstance(e, HistoryError):
+            raise
+        raise HistoryError(f"cannot upgrade the history database {describe(engine.url)!r}: {e}") from None
     return head
+
+
+def _sqlite_file(engine: Engine) -> Path | None:
+    url = str(engine.url)
+    if engine.dialect.name != "sqlite" or not url.startswith("sqlite:///") or url == "sqlite:///:memory:":
+        return None
+    return Path(url.removeprefix("sqlite:///"))
+
+
+def _check_sqlite_file(engine: Engine, *, allow_empty: bool) -> None:
+    """An existing SQLite file must start with SQLite's header (else it is not a database at all)."""
+    path = _sqlite_file(engine)
+    if path is None or not path.exists():
+        return
+    try:
+        with path.open("rb") as f:
+            head = f.read(len(_SQLITE_MAGIC))
+    except OSError as e:
+        raise HistoryError(f"cannot read the history database {str(path)!r}: {e}") from None
+    if not head and allow_empty:
+        return
+    if head != _SQLITE_MAGIC:
+        what = "is empty" if not head else "is not an SQLite database"
+        raise HistoryError(f"{str(path)!r} {what}: not a wott-hub history database")
+
+
+def check_integrity(engine: Engine) -> None:
+    """SQLite's ``PRAGMA quick_check`` (every page and index readable and consistent; a full
+    scan, ~1 s per GB); a HistoryError naming the first problem. Other engines check their own
+    storage: nothing to do."""
+    if engine.dialect.name != "sqlite":
+        return
+    try:
+        with engine.connect() as conn:
+            result = conn.exec_driver_sql("PRAGMA quick_check(1)").scalar()
+    except sa.exc.DBAPIError as e:
+        raise HistoryError(f"the history database {describe(engine.url)!r} is corrupted: "
+                           f"{getattr(e, 'orig', None) or e}") from None
+    if result != "ok":
+        problem = "; ".join(line for line in str(result).splitlines() if not line.startswith("***"))
+        raise HistoryError(f"the history database {describe(engine.url)!r} is corrupted: {problem}")
+
+
+def open_existing(database: str | Path, *, integrity: bool = True) -> Engine:
+    """An engine on an existing history database, for reading (``history``, ``replay``): never
+    creates a file, never migrates; a HistoryError if it is missing, empty, not a history
+    database, of a newer schema, or (``integrity``) corrupted."""
+    url = database_url(database)
+    path = Path(url.removeprefix("sqlite:///")) if url.startswith("sqlite:///") else None
+    if path is not None and not path.is_file():
+        raise HistoryError(f"no history database at {str(path)!r}")
+    engine = create_engine(url)
+    try:
+        _check_sqlite_file(engine, allow_empty=False)
+        from .models import HEAD_REVISION
+
+        current = current_revision(engine)
+        if current is None:
+            raise HistoryError(f"{describe(engine.url)!r} is not a wott-hub history database (no schema)")
+        if current != HEAD_REVISION:
+            _check_known(engine, current)
+        if integrity:
+            check_integrity(engine)
+    except BaseException:
+        engine.dispose()
+        raise
+    return engine

@@ -8,7 +8,7 @@ decoded and re-encoded).
 from __future__ import annotations
 
 import json
-from typing import TextIO
+from typing import IO
 
 from wott_hub.events.record import KIND_NAMES
 
@@ -17,7 +17,7 @@ from .reader import HistoryReader
 __all__ = ["export_jsonl"]
 
 
-def export_jsonl(reader: HistoryReader, out: TextIO, thing: str, *, t_from_ns: int | None = None,
+def export_jsonl(reader: HistoryReader, out: IO[str], thing: str, *, t_from_ns: int | None = None,
                  t_to_ns: int | None = None, names: list[str] | None = None) -> int:
     """Write the records of ``thing`` in [t_from, t_to] to ``out``; returns how many."""
     head = '{"thing":' + json.dumps(thing) + ',"seq":'

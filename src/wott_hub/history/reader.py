@@ -6,22 +6,31 @@ range is first turned into a seq range through ``ix_events_thing_time``.
 Within a Thing, time order is seq order: the processor rejects frames that go
 back in time. Pages are separate short transactions, so a long replay never
 holds a read snapshot open (SQLite could not checkpoint its WAL meanwhile).
+
+Contract: a read the database fails (a corrupted page, a file that is not a
+database, a lost connection) raises ``wott_hub.errors.HistoryError`` naming
+the database, and is noted in its ``DatabaseState`` (the writer's health
+turns "degraded"); it never ends as an empty result.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ParamSpec, TypeVar
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
 from wott_hub.events.record import Record
 
+from .codec import decode
+from .db import HistoryError, describe
 from .models import EventRow, ThingRow
+from .state import state_of
 
 __all__ = ["HistoryReader", "ThingSummary"]
 
@@ -44,7 +53,29 @@ class ThingSummary:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
-def _seq_range(key: int, after: int, upto: int, limit: int) -> sa.Select:
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def _guarded(method: Callable[_P, _R]) -> Callable[_P, _R]:
+    """Driver errors of a read become a HistoryError (and are noted in the database's state)."""
+
+    @functools.wraps(method)
+    def wrapper(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        self: HistoryReader = args[0]  # type: ignore[assignment]  # a method: args[0] is self
+        try:
+            return method(*args, **kwargs)
+        except (sa.exc.DBAPIError, sa.exc.OperationalError) as e:
+            raise self._failed(e) from None
+        except Exception as e:  # the DBAPI's own errors (PEP 249), raised by the raw cursor of _fetch
+            if any(c.__name__ in ("DatabaseError", "InterfaceError") for c in type(e).__mro__):
+                raise self._failed(e) from None
+            raise
+
+    return wrapper
+
+
+def _seq_range(key: int, after: int, upto: int, limit: int) -> sa.Select[int, int, int, str, bytes]:
     """(seq, t_ns, kind, name, data) of the Thing ``key`` with after < seq <= upto, in seq order."""
     return (sa.select(_E.c.seq, _E.c.t_ns, _E.c.kind, _E.c.name, _E.c.data)
             .where(_E.c.thing_key == key, _E.c.seq > after, _E.c.seq <= upto)
@@ -55,8 +86,20 @@ class HistoryReader:
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
         self._keys: dict[str, int] = {}
+        self.state = state_of(engine)
 
-    def _fetch(self, stmt) -> list[tuple]:
+    @property
+    def failure(self) -> str:
+        """Why this database cannot be trusted to answer (known corrupted), else ""."""
+        return self.state.corrupted
+
+    def _failed(self, e: BaseException) -> HistoryError:
+        cause = str(getattr(e, "orig", None) or e).splitlines()[0]
+        self.state.read_failed(cause)
+        return HistoryError(f"cannot read the history database {describe(self.engine.url)!r}: {cause}")
+
+    @_guarded
+    def _fetch(self, stmt: sa.Select[int, int, int, str, bytes]) -> list[tuple[Any, ...]]:
         """Rows as plain tuples straight from the driver's cursor.
 
         The statement is compiled by SQLAlchemy for the engine's dialect (so the
@@ -66,14 +109,19 @@ class HistoryReader:
         with self.engine.connect() as conn:
             compiled = stmt.compile(dialect=conn.dialect)
             params = compiled.params
-            args = tuple(params[k] for k in compiled.positiontup) if compiled.positional else params
-            cur = conn.connection.driver_connection.cursor()
+            order = compiled.positiontup  # set when the driver's paramstyle is positional
+            args = tuple(params[k] for k in order) if compiled.positional and order is not None else params
+            raw = conn.connection.driver_connection
+            assert raw is not None  # an open connection has its driver's
+            cur = raw.cursor()
             try:
                 cur.execute(str(compiled), args)
-                return cur.fetchall()
+                rows: list[tuple[Any, ...]] = cur.fetchall()
+                return rows
             finally:
                 cur.close()
 
+    @_guarded
     def key(self, thing: str) -> int | None:
         key = self._keys.get(thing)
         if key is None:
@@ -85,6 +133,7 @@ class HistoryReader:
 
     # --- what is recorded -----------------------------------------------------------
 
+    @_guarded
     def things(self) -> list[ThingSummary]:
         out = []
         with self.engine.connect() as conn:
@@ -102,6 +151,7 @@ class HistoryReader:
                 out.append(ThingSummary(tid, title, family, count, s0, s1, t0, t1))
         return out
 
+    @_guarded
     def thing_info(self, thing: str) -> dict[str, Any] | None:
         """Title, family, TD and static property values recorded for ``thing``."""
         with self.engine.connect() as conn:
@@ -123,7 +173,7 @@ class HistoryReader:
         kind, name = interest
         rows = self._fetch(_seq_range(key, after, upto, limit))
         reached = rows[-1][0] if len(rows) == limit else upto
-        recs = [Record(thing, s, k, n, t, d) for s, t, k, n, d in rows
+        recs = [Record(thing, s, k, n, t, decode(d, t)) for s, t, k, n, d in rows
                 if k == kind and (name is None or n == name)]
         return recs, reached
 
@@ -133,6 +183,7 @@ class HistoryReader:
 
     # --- ranges (export, replay) ----------------------------------------------------
 
+    @_guarded
     def seq_range(self, thing: str, t_from_ns: int | None = None,
                   t_to_ns: int | None = None) -> tuple[int, int] | None:
         """First and last seq of ``thing`` within [t_from, t_to]; None if nothing is there."""
@@ -153,12 +204,14 @@ class HistoryReader:
         return lo, hi
 
     def pages(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
-              names: list[str] | None = None, page: int = 20_000) -> Iterator[list[tuple]]:
-        """Pages of (seq, t_ns, kind, name, data) in seq (= time) order."""
+              names: list[str] | None = None, page: int = 20_000) -> Iterator[list[tuple[Any, ...]]]:
+        """Pages of (seq, t_ns, kind, name, data) in seq (= time) order; ``data`` the text sent live."""
         bounds = self.seq_range(thing, t_from_ns, t_to_ns)
         if bounds is None:
             return
         key = self.key(thing)
+        if key is None:  # never: seq_range found records of it
+            return
         lo, hi = bounds
         cursor = lo - 1
         while cursor < hi:
@@ -171,4 +224,4 @@ class HistoryReader:
                 hi_t = t_to_ns if t_to_ns is not None else 1 << 63
                 rows = [r for r in rows if lo_t <= r[1] <= hi_t and (not names or r[3] in names)]
             if rows:
-                yield rows
+                yield [(s, t, k, n, decode(d, t)) for s, t, k, n, d in rows]  # stored -> sent text

@@ -5,14 +5,24 @@ at ``start + (t - t_first) / speed``; ``speed=0`` emits as fast as possible.
 Pages are read in a worker thread one page ahead, so reading never delays
 emission. With ``loop`` the range starts again after its end, one mean record
 interval later.
+
+Like ``ros2 bag play``: ``names`` keeps only those affordances (the topic filter),
+several Things replay together on one time base (``merge.py``: the order in which
+they were recorded, whatever their rates), and ``offset_s`` starts that many seconds
+into the range (each loop cycle starts there again).
 """
 
 from __future__ import annotations
 
 import asyncio
+import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
+from wott_hub.errors import InvalidInput
+
+from .merge import merged_pages, resolve_range
 from .reader import HistoryReader
 
 __all__ = ["Replayer"]
@@ -20,30 +30,57 @@ __all__ = ["Replayer"]
 Emit = Callable[[int, str, int, str], None]
 """emit(kind, name, t_ns, data)"""
 
+EmitFrom = Callable[[str, int, str, int, str], None]
+"""emit(thing, kind, name, t_ns, data): the Thing the record was recorded for comes first"""
+
 
 class Replayer:
-    def __init__(self, reader: HistoryReader, thing: str, *, t_from_ns: int | None = None,
+    def __init__(self, reader: HistoryReader, thing: str | Sequence[str], *, t_from_ns: int | None = None,
                  t_to_ns: int | None = None, speed: float = 1.0, loop: bool = False,
-                 names: list[str] | None = None, page: int = 20_000) -> None:
-        if not speed >= 0:
-            raise ValueError(f"speed must be >= 0 (0: as fast as possible), got {speed}")
+                 names: list[str] | None = None, page: int = 20_000, offset_s: float = 0.0) -> None:
+        if not (speed >= 0 and math.isfinite(speed)):  # nan and inf too: they would never emit
+            raise InvalidInput(f"speed must be a finite number >= 0 (0: as fast as possible), got {speed}")
+        if not (isinstance(offset_s, int | float) and math.isfinite(offset_s) and offset_s >= 0):
+            raise InvalidInput(f"offset must be a finite number of seconds >= 0, got {offset_s!r}")
         self.reader = reader
-        self.thing = thing
+        self.things = [thing] if isinstance(thing, str) else list(thing)
+        if not self.things:
+            raise InvalidInput("replay needs at least one recorded device")
+        self.thing = self.things[0]
         self.t_from_ns = t_from_ns
         self.t_to_ns = t_to_ns
+        self.offset_ns = int(offset_s * 1e9)
         self.speed = speed
         self.loop = loop
-        self.names = names
+        self.names = names or None
         self.page = page
         self.emitted = 0
         self.cycles = 0
 
     async def run(self, emit: Emit, stop: asyncio.Event | None = None) -> int:
         """Emit until the range ends (or forever with ``loop``, until ``stop`` is set)."""
+        if len(self.things) == 1:
+            return await self._run(emit, None, stop)
+        return await self._run(None, lambda _thing, k, n, t, d: emit(k, n, t, d), stop)
+
+    async def run_from(self, emit: EmitFrom, stop: asyncio.Event | None = None) -> int:
+        """``run`` for several Things: ``emit`` is told which Thing each record belongs to."""
+        return await self._run(None, emit, stop)
+
+    def _pages(self, lo: int | None, hi: int | None, tagged: bool) -> Iterator[list[tuple[Any, ...]]]:
+        if tagged:
+            return merged_pages(self.reader, self.things, lo, hi, self.names, self.page)
+        return self.reader.pages(self.thing, lo, hi, self.names, self.page)  # (seq, t, kind, name, data)
+
+    async def _run(self, emit: Emit | None, emit_from: EmitFrom | None, stop: asyncio.Event | None) -> int:
         loop = asyncio.get_running_loop()
+        lo, hi = await asyncio.to_thread(resolve_range, self.reader, self.things, self.t_from_ns,
+                                         self.t_to_ns, self.offset_ns)
+        tagged = emit_from is not None
+        now = time.time_ns
         clock0: float | None = None
         while stop is None or not stop.is_set():
-            pages = self.reader.pages(self.thing, self.t_from_ns, self.t_to_ns, self.names, self.page)
+            pages = self._pages(lo, hi, tagged)
             nxt = asyncio.ensure_future(asyncio.to_thread(next, pages, None))
             t_first = t_last = None
             n_cycle = 0
@@ -52,22 +89,43 @@ class Replayer:
                 if rows is None:
                     break
                 nxt = asyncio.ensure_future(asyncio.to_thread(next, pages, None))
-                for _seq, t_ns, kind, name, data in rows:
-                    if t_first is None:
-                        t_first = t_ns
-                        if clock0 is None:
-                            clock0 = loop.time()
-                    if self.speed > 0:
-                        due = clock0 + (t_ns - t_first) / 1e9 / self.speed
-                        delay = due - loop.time()
-                        if delay > 0.0002:
-                            await asyncio.sleep(delay)
-                            if stop is not None and stop.is_set():
-                                nxt.cancel()
-                                return self.emitted
-                    elif n_cycle % 2000 == 1999:
+                ti = 2 if tagged else 1  # where t_ns is in a row
+                if t_first is None:
+                    t_first = rows[0][ti]
+                    if clock0 is None:
+                        clock0 = loop.time()
+                if self.speed == 0:  # as fast as possible: no clock, a yield every 2,000 records
+                    for i in range(0, len(rows), 2000):
+                        if emit_from is not None:
+                            for thing, _seq, _t, kind, name, data in rows[i:i + 2000]:
+                                emit_from(thing, kind, name, now(), data)
+                        else:
+                            assert emit is not None
+                            for _seq, _t, kind, name, data in rows[i:i + 2000]:
+                                emit(kind, name, now(), data)
                         await asyncio.sleep(0)
-                    emit(kind, name, time.time_ns(), data)
+                        if stop is not None and stop.is_set():
+                            nxt.cancel()
+                            self.emitted += min(len(rows), i + 2000)
+                            return self.emitted
+                    n_cycle += len(rows)
+                    self.emitted += len(rows)
+                    t_last = rows[-1][ti]
+                    continue
+                for row in rows:
+                    t_ns = row[ti]
+                    due = clock0 + (t_ns - t_first) / 1e9 / self.speed
+                    delay = due - loop.time()
+                    if delay > 0.0002:
+                        await asyncio.sleep(delay)
+                        if stop is not None and stop.is_set():
+                            nxt.cancel()
+                            return self.emitted
+                    if emit_from is not None:
+                        emit_from(row[0], row[3], row[4], now(), row[5])
+                    else:
+                        assert emit is not None
+                        emit(row[2], row[3], now(), row[4])
                     t_last = t_ns
                     n_cycle += 1
                     self.emitted += 1

@@ -1,26 +1,41 @@
 """Retention: drop the oldest events by age and/or by database size.
 
 Runs in the writer thread (no lock contention with the batches). Age is exact.
-Size is the space the data uses (SQLite: pages in use; PostgreSQL: the events
-table with its indexes); when over the limit, events older than a cut-off
+Size is the space the data uses (SQLite: pages in use; PostgreSQL: the bytes of
+the live rows of events, scaled by the table's index-to-heap ratio: deleted rows
+keep their space until autovacuum makes it reusable, as SQLite's free pages are,
+so the table's size on disk does not say what is used); when over the limit, events older than a cut-off
 time are deleted, the cut-off chosen from the time span the data covers so
-that about 90 % of the limit remains, repeated until under it. An SQLite file
-does not shrink when rows are deleted: the freed pages are reused, so the file
-stops growing at about the limit (``VACUUM`` gives the space back to the OS).
+that about 90 % of the limit remains, repeated until under it.
+
+Giving the space back: an SQLite history database is made with ``auto_vacuum =
+INCREMENTAL`` (``db.py``; migration 0006 converts an older file with one ``VACUUM``),
+so after a pass that deleted rows ``PRAGMA incremental_vacuum`` moves the last pages
+into the freed ones and truncates the file (at the next WAL checkpoint, run passively
+right after): the file shrinks to what the data uses, and a hub over ``retention_mb``
+keeps its file at about the limit while it keeps writing. The cost is proportional to
+what was freed (pages moved), paid in the writer thread once per check. A file still
+without auto-vacuum (``PRAGMA auto_vacuum`` 0) reuses its freed pages instead: it stops
+growing at about the limit, without shrinking. PostgreSQL: autovacuum makes the space of
+deleted rows reusable; the table does not shrink (``VACUUM FULL`` does, offline).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Connection, Engine
 
+from wott_hub.errors import InvalidInput
+
 from .models import EventRow, ThingRow
 
-__all__ = ["Retention", "apply_retention", "used_bytes"]
+__all__ = ["Retention", "apply_retention", "give_back", "used_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -31,6 +46,14 @@ class Retention:
     max_mb: float | None = None
     check_every_s: float = 60.0
 
+    def __post_init__(self) -> None:
+        # checked here too (not only at config load): an infinite age would fail every minute
+        for name, top in (("days", 36_500.0), ("max_mb", 1e9), ("check_every_s", 86_400.0)):
+            v = getattr(self, name)
+            ok = isinstance(v, int | float) and math.isfinite(v) and 0 <= v <= top
+            if v is not None and not (ok and (v > 0 or name != "check_every_s")):  # days/max_mb 0: off
+                raise InvalidInput(f"retention {name} must be a number in (0, {top:g}], got {v!r}")
+
     @property
     def active(self) -> bool:
         return bool(self.days) or bool(self.max_mb)
@@ -39,12 +62,15 @@ class Retention:
 def used_bytes(conn: Connection) -> int | None:
     name = conn.dialect.name
     if name == "sqlite":
-        pages = conn.exec_driver_sql("PRAGMA page_count").scalar()
-        free = conn.exec_driver_sql("PRAGMA freelist_count").scalar()
-        size = conn.exec_driver_sql("PRAGMA page_size").scalar()
-        return (pages - free) * size
-    if name == "postgresql":
-        return conn.exec_driver_sql("SELECT pg_total_relation_size('events')").scalar()
+        pages = conn.exec_driver_sql("PRAGMA page_count").scalar_one()  # each PRAGMA answers one row
+        free = conn.exec_driver_sql("PRAGMA freelist_count").scalar_one()
+        size = conn.exec_driver_sql("PRAGMA page_size").scalar_one()
+        return int((pages - free) * size)
+    if name == "postgresql":  # a scan of events: retention runs once a minute, off the hot path
+        live, heap, total = conn.exec_driver_sql(
+            "SELECT (SELECT coalesce(sum(pg_column_size(e.*) + 28), 0) FROM events e), "  # + header
+            "pg_relation_size('events'), pg_total_relation_size('events')").one()
+        return int(live * total / heap) if heap else int(live)
     return None
 
 
@@ -59,7 +85,8 @@ def _delete_before(conn: Connection, keys: list[int], cutoff_ns: int) -> int:
 
 def _span(conn: Connection, keys: list[int]) -> tuple[int, int] | None:
     events = EventRow.__table__
-    lo, hi = None, None
+    lo: int | None = None
+    hi: int | None = None
     for key in keys:
         a, b = conn.execute(sa.select(sa.func.min(events.c.t_ns), sa.func.max(events.c.t_ns))
                             .where(events.c.thing_key == key)).one()
@@ -67,7 +94,7 @@ def _span(conn: Connection, keys: list[int]) -> tuple[int, int] | None:
             continue
         lo = a if lo is None else min(lo, a)
         hi = b if hi is None else max(hi, b)
-    return None if lo is None else (lo, hi)
+    return None if lo is None or hi is None else (lo, hi)  # both set together
 
 
 def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> int:
@@ -89,7 +116,7 @@ def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> 
             with engine.connect() as conn:
                 used = used_bytes(conn)
                 span = _span(conn, keys) if used is not None and used > limit else None
-            if span is None or span[0] >= span[1]:
+            if span is None or used is None or span[0] >= span[1]:  # used is set when span is
                 break
             lo, hi = span
             keep = max(0.0, min(1.0, 0.9 * limit / used))
@@ -100,4 +127,21 @@ def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> 
                 break
     if deleted:
         log.info("retention deleted %d events", deleted)
+        give_back(engine)
     return deleted
+
+
+def give_back(engine: Engine) -> int:
+    """SQLite with incremental auto-vacuum: return the free pages to the file system; returns
+    how many pages were free. Elsewhere nothing to do (0)."""
+    if engine.dialect.name != "sqlite":
+        return 0
+    with engine.connect() as conn:
+        if conn.exec_driver_sql("PRAGMA auto_vacuum").scalar() != 2:
+            return 0
+        free = conn.exec_driver_sql("PRAGMA freelist_count").scalar() or 0
+        if free:
+            raw: Any = conn.connection.driver_connection
+            # one page per step, and sqlite3's execute steps once: executescript runs it to its end
+            raw.executescript("PRAGMA incremental_vacuum; PRAGMA wal_checkpoint(PASSIVE);")
+    return int(free)

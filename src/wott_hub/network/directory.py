@@ -16,6 +16,14 @@ mounted when the hub is built and the directory opens with the database, a
 moment after the TDs are served: a request arriving in between waits for it
 (``routes.py``), as the hub's own stream requests wait for the history.
 
+Identity (docs/scale-out.md): every Thing id of a hub carries its hub id
+(``urn:wott-hub:<hub-id>:...``). Before registering into a ``register_to``
+directory the hub looks its own hub Thing up there: registered by another hub
+that is still alive (the registration has not expired and the TD's ``base``,
+another address than this hub's, answers with that id), the hub refuses to start
+(``Conflict``) instead of overwriting it. A registration left by a crashed run of
+the same hub (expired, or its base silent or this hub's own) is taken over.
+
 Writes by other clients: with ``[directory] token`` they need that bearer
 token; without one, clients on loopback write freely when the hub listens on
 loopback only (the demo), and nobody else can write. The hub itself writes
@@ -26,8 +34,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 from collections.abc import Awaitable, Callable
+from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any
 
 from .config import DirectoryConfig
@@ -36,15 +46,17 @@ from .routes import DIRECTORY_PATHS, DirectoryRouter
 if TYPE_CHECKING:
     from wott_directory import Directory, Registrar
 
-    from wott_hub.hub import Hub
+    from .port import HubPort
 
 __all__ = ["HubDirectory", "OWN_ID_PREFIX"]
 
 log = logging.getLogger("wott_hub.network")
 
 OWN_ID_PREFIX = "urn:wott-hub:"
-"""Ids of the TDs a hub builds (devices, the hub Thing, replays): stale ones of a previous run,
-registered without a ttl, are deleted from the embedded directory when the hub starts."""
+"""Ids of the TDs any wott-hub builds (devices, the hub Thing, replays), of every hub."""
+LEGACY_PREFIXES = ("urn:wott-hub:device:", "urn:wott-hub:hub:", "urn:wott-hub:replay:")
+"""Ids of the scheme before hub ids (one hub per directory): a previous run's leftovers."""
+LIVENESS_TIMEOUT_S = 3.0
 
 Op = Callable[[], Awaitable[Any]]
 UNREGISTER_TIMEOUT_S = 5.0
@@ -92,7 +104,7 @@ class _Worker:
 
 
 class HubDirectory:
-    def __init__(self, hub: Hub, cfg: DirectoryConfig) -> None:
+    def __init__(self, hub: HubPort, cfg: DirectoryConfig) -> None:
         self.hub = hub
         self.cfg = cfg
         self.directory: Directory | None = None
@@ -100,7 +112,7 @@ class HubDirectory:
         self._workers: list[tuple[_Worker, Any]] = []  # (worker, the embedded Directory or a Registrar)
         self.router: DirectoryRouter | None = None
         if cfg.enabled:  # mounted now, without importing the directory (see routes.py)
-            self.router = DirectoryRouter(hub.server.http.app)
+            self.router = DirectoryRouter(hub.http_app)
             hub.add_handlers([(DIRECTORY_PATHS, self.router)])
 
     @property
@@ -111,12 +123,14 @@ class HubDirectory:
     # --- lifecycle ------------------------------------------------------------------
 
     async def start(self) -> None:
+        for reg in self.cfg.register_to:  # before anything is opened or registered: a refusal leaves nothing
+            await self._check_not_taken(reg.url, reg.token)
         try:
             if self.cfg.enabled:
                 await self._open_embedded()
             for reg in self.cfg.register_to:
                 self._add_registrar(reg.url, reg.token)
-            for thing in list(self.hub.server.things):
+            for thing in self.hub.served():
                 self.exposed(thing.td)
             if self.directory is not None:  # a client waiting for /things gets the whole fleet
                 await self._workers[0][0].drain()
@@ -131,18 +145,23 @@ class HubDirectory:
         from wott_directory.settings import is_loopback
 
         cfg, hub = self.cfg, self.hub
-        open_writes = cfg.token is None and is_loopback(hub.config.host)
-        if cfg.token is None and not open_writes:
+        # the hub's gate checks clients' scoped tokens (wott_hub.security) and hands the directory the
+        # hub's own credential instead: the directory then declares and requires bearer for everything
+        credential = getattr(hub, "directory_credential", None)
+        token, protect_reads = (credential, True) if credential else (cfg.token, cfg.protect_reads)
+        open_writes = token is None and is_loopback(hub.host)
+        if token is None and not open_writes:
             log.warning("the hub's directory accepts no registrations from others: it listens on %s and "
-                        "[directory] token is not set", hub.config.host)
-        settings = DirectorySettings(base_url=f"{hub.http_url}/", title=f"{hub.config.name} directory",
-                                     token=cfg.token, open_writes=open_writes,
-                                     protect_reads=cfg.protect_reads)
+                        "[directory] token is not set", hub.host)
+        settings = DirectorySettings(base_url=f"{hub.http_url}/", title=f"{hub.name} directory",
+                                     token=token, open_writes=open_writes,
+                                     protect_reads=protect_reads)
         # the hub's database, migrated by the hub (revision 0002 has the directory's tables);
         # without history, a directory in memory that lives as long as the hub
         engine = hub.engine
         directory = Directory(settings, engine if engine is not None else "sqlite://",
-                              create_tables=engine is None)
+                              create_tables=engine is None,
+                              td_security=getattr(hub, "directory_td_security", None))
         try:
             await directory.start()
         except Exception:
@@ -150,17 +169,57 @@ class HubDirectory:
             await directory.stop()
             return
         self.directory = directory
+        assert self.router is not None  # made with the config's enabled = true
         self.router.install(directory_handlers(directory, prefix=""))
         await self._forget_stale()
         worker = _Worker("embedded")
         worker.start()
         self._workers.append((worker, directory))
 
+    async def _check_not_taken(self, url: str, token: str | None) -> None:
+        """``Conflict`` if this hub's Thing id is registered in ``url`` by another live hub."""
+        from wott_directory import DirectoryClient
+        from wott_directory.client import ProblemError
+
+        from wott_hub.errors import Conflict
+
+        tid = self.hub.hub_thing_id
+        client = DirectoryClient(url, token=token, timeout=LIVENESS_TIMEOUT_S)
+        try:
+            try:
+                td = await client.get(tid)
+            except (ProblemError, OSError):  # not there (404), or the directory is down: the
+                return  # registrar keeps trying, and checks nothing later; nobody to collide with now
+            expires = (td.get("registration") or {}).get("expires")
+            if isinstance(expires, str):
+                with contextlib.suppress(ValueError):
+                    when = datetime.fromisoformat(expires)
+                    if (when if when.tzinfo else when.replace(tzinfo=UTC)) <= datetime.now(UTC):
+                        return
+            base = td.get("base")
+            if not isinstance(base, str) or base.rstrip("/") == self.hub.http_url.rstrip("/"):
+                return  # this hub's own registration, left by a crashed run on the same address
+            try:
+                resp = await client.http.fetch(f"{base.rstrip('/')}/wot/hub", raise_error=False,
+                                               request_timeout=LIVENESS_TIMEOUT_S)
+            except OSError:  # its base is silent: a hub that died before its registration expired
+                return
+            if resp.code == 200:
+                with contextlib.suppress(ValueError):
+                    if json.loads(resp.body).get("id") == tid:
+                        raise Conflict(
+                            f"hub id {self.hub.hub_id!r} is taken: {url} has {tid} registered by the "
+                            f"live hub at {base}; give this hub another [hub] id (or remove its "
+                            f"id file) - docs/scale-out.md")
+        finally:
+            client.close()
+
     async def _forget_stale(self) -> None:
         """Delete the TDs a previous run of this hub put and this one does not serve (a device
-        removed from the config, a hub renamed): ids of the hub's own scheme without a ttl.
-        Other producers register with a ttl (``Registrar``) and are left to expire."""
-        served = {t.td.get("id") for t in self.hub.server.things}
+        removed from the config, a hub renamed): ids of this hub's (or the old, hub-less) scheme
+        without a ttl. Other producers, other hubs sharing the database included, register with a
+        ttl (``Registrar``) or another hub id, and are left alone."""
+        served = {t.td.get("id") for t in self.hub.served()}
         directory = self.directory
         assert directory is not None
         stale = []
@@ -169,7 +228,8 @@ class HubDirectory:
             page, total = directory.page(offset, 1000)
             for td in page:
                 tid = td.get("id", "")
-                if (tid.startswith(OWN_ID_PREFIX) and tid not in served
+                if ((tid.startswith(self.hub.id_prefix) or tid.startswith(LEGACY_PREFIXES))
+                        and tid not in served
                         and "expires" not in (td.get("registration") or {})):
                     stale.append(tid)
             offset += len(page)
@@ -232,7 +292,7 @@ class HubDirectory:
 
     def _put_op(self, target: Any, tid: str, td: dict[str, Any]) -> Op:
         async def put() -> None:
-            if target is self.directory:
+            if self.directory is not None and target is self.directory:
                 from wott_directory import DirectoryError
 
                 try:
@@ -248,7 +308,7 @@ class HubDirectory:
 
     def _delete_op(self, target: Any, tid: str) -> Op:
         async def delete() -> None:
-            if target is self.directory:
+            if self.directory is not None and target is self.directory:
                 if tid in target:
                     await target.delete(tid)
             else:

@@ -22,18 +22,23 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+from collections.abc import Awaitable
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
+from wott_hub.drivers.base import Retargetable
 from wott_hub.servient import ALL_INTERFACES
 
 from .config import DiscoveryConfig
 from .directory import OWN_ID_PREFIX
 
 if TYPE_CHECKING:
-    from wott_hub.discovery import FoundThing
-    from wott_hub.hub import Hub
+    from zeroconf.asyncio import AsyncZeroconf
+
+    from wott_hub.discovery import Announcer, Browser, Explorer, FoundThing
+
+    from .port import HubPort
 
 __all__ = ["HubDiscovery", "instance_label"]
 
@@ -48,14 +53,14 @@ def instance_label(text: str, limit: int = 63) -> str:
 
 
 class HubDiscovery:
-    def __init__(self, hub: Hub, cfg: DiscoveryConfig, own_ids: set[str]) -> None:
+    def __init__(self, hub: HubPort, cfg: DiscoveryConfig, own_ids: set[str]) -> None:
         self.hub = hub
         self.cfg = cfg
         self.own_ids = own_ids  # TD ids of everything the hub serves (and its directory's), kept live
-        self.zc: Any = None
-        self.announcer: Any = None
-        self.browser: Any = None
-        self.explorer: Any = None
+        self.zc: AsyncZeroconf | None = None
+        self.announcer: Announcer | None = None
+        self.browser: Browser | None = None
+        self.explorer: Explorer | None = None
         self.adopted: dict[str, str] = {}  # foreign TD id -> device id
         self.unclaimed: dict[str, str] = {}  # foreign TD id -> its URL: no plugin adopts it
         self.failed: dict[str, str] = {}  # foreign TD id -> why adopting it failed
@@ -69,7 +74,7 @@ class HubDiscovery:
         """Interface addresses for zeroconf; None: all of them."""
         if self.cfg.interfaces:
             return list(self.cfg.interfaces)
-        host = self.hub.config.host
+        host = self.hub.host
         if host in ALL_INTERFACES:
             return None
         if host == "localhost":
@@ -102,7 +107,7 @@ class HubDiscovery:
             self.announcer = Announcer(self.zc, addresses=self.addresses())
             if directory_port is not None:
                 self._spawn(self._announce_directory(directory_port))
-            for thing in list(self.hub.server.things):
+            for thing in self.hub.served():
                 self.exposed(thing.id)
         self.started = True  # from here on, what the explorer finds is adopted
         if (self.zc is not None and cfg.browse) or cfg.directories:
@@ -137,7 +142,7 @@ class HubDiscovery:
                 await self.zc.async_close()
             self.zc = None
 
-    def _spawn(self, coro: Any) -> None:
+    def _spawn(self, coro: Awaitable[object]) -> None:
         task = asyncio.ensure_future(coro)
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
@@ -150,10 +155,19 @@ class HubDiscovery:
         return name in self.announcer.names or name in self._names.values()
 
     async def _announce_directory(self, port: int) -> None:
+        announcer = self.announcer
+        assert announcer is not None  # spawned once it is made; it stays
         try:
-            await self.announcer.announce_directory(instance_label(self.hub.config.name), port)
+            await announcer.announce_directory(self._instance(self.hub.name), port,
+                                               scheme=urlsplit(self.hub.http_url).scheme)  # https: TLS
         except Exception as e:
             log.warning("could not announce the directory on mDNS: %s", e)
+
+    def _instance(self, text: str) -> str:
+        """An instance name ending in the hub's id, kept whole when ``text`` is cut: two hubs (of
+        one name, serving devices of one id) never announce the same instance or host name."""
+        suffix = f" {self.hub.hub_id}"  # 55: the host label the announcer makes of it keeps 55 bytes
+        return instance_label(text, limit=55 - len(suffix.encode())) + suffix
 
     def exposed(self, thing_id: str) -> None:
         if self.announcer is None:
@@ -163,17 +177,20 @@ class HubDiscovery:
     async def _announce_thing(self, thing_id: str) -> None:
         if thing_id in self._names:
             return
+        announcer = self.announcer
+        assert announcer is not None  # spawned once it is made; it stays
         path = urlsplit(self.hub.td_url(thing_id)).path
-        name = instance_label(f"{thing_id} on {self.hub.config.name}")
+        name = self._instance(f"{thing_id} on {self.hub.name}")
         intended = self._names[thing_id] = f"{name}._wot._tcp.local."  # the browser skips it already
         try:
-            full = await self.announcer.announce_thing(name, self.hub.server.http_port, path)
+            full = await announcer.announce_thing(name, self.hub.http_port, path,
+                                                  urlsplit(self.hub.http_url).scheme)
         except Exception as e:
             self._names.pop(thing_id, None)
             log.warning("could not announce %s on mDNS: %s", thing_id, e)
             return
         if self._names.get(thing_id) != intended:  # removed while it was being announced
-            await self.announcer.withdraw(full)
+            await announcer.withdraw(full)
             return
         self._names[thing_id] = full
 
@@ -202,14 +219,14 @@ class HubDiscovery:
         await self._adopt(found)
 
     async def _adopt(self, found: FoundThing) -> None:
-        from wott_hub.drivers.base import DriverError
+        from wott_hub.errors import WottHubError
 
         cfg = found.config
         device_id = self._free_id(cfg.id)
         try:
             await self.hub.add_device(replace(cfg, id=device_id))
         except Exception as e:  # DriverError, or a plugin's bug: the others are still adopted
-            self.failed[found.id] = str(e) if isinstance(e, DriverError) else f"{type(e).__name__}: {e}"
+            self.failed[found.id] = str(e) if isinstance(e, WottHubError) else f"{type(e).__name__}: {e}"
             log.warning("could not adopt %s (%s): %s", found.id, found.url, self.failed[found.id])
             return
         self.failed.pop(found.id, None)
@@ -218,11 +235,11 @@ class HubDiscovery:
         log.info("adopted %s from %s as device %r (family %s)", found.id, found.url, device_id, cfg.family)
 
     def _free_id(self, wanted: str) -> str:
-        taken = self.hub.server.things.by_id  # every device of the hub is served
-        if wanted not in taken:
+        served = self.hub.is_served  # every device of the hub is served
+        if not served(wanted):
             return wanted
         n = 2
-        while f"{wanted}-{n}" in taken:
+        while served(f"{wanted}-{n}"):
             n += 1
         return f"{wanted}-{n}"
 
@@ -234,19 +251,25 @@ class HubDiscovery:
         if not self.started or not self._may_adopt(found):
             return
         device_id = self.adopted.get(found.id)
-        dev = self.hub.devices.get(device_id) if device_id is not None else None
+        dev = self.hub.device(device_id) if device_id is not None else None
         if dev is None:
             if found.config is None:
                 found.config = registry_claim(found.td)
             if found.config is not None:
                 await self._adopt(found)
             return
-        retarget = getattr(dev.driver, "retarget", None)
-        if retarget is not None:
-            retarget(found.td)
+        if isinstance(dev.driver, Retargetable):
+            from wott_hub.plugins.isolation import attempt  # plugin code: its failure stays with it
+
+            out = attempt("retarget()", dev.driver.retarget, found.td)
+            if out.fault is not None:
+                log.error("device %r (%s) not moved to %s: %s", device_id, found.id, found.url,
+                          out.fault.reason)
+                return
             log.info("device %r (%s) moved to %s", device_id, found.id, found.url)
             return
         new = registry_claim(found.td)  # a plugin's driver without retarget: open it again
+        assert device_id is not None  # it has a device
         await self.hub.remove_device(device_id)
         self.adopted.pop(found.id, None)
         if new is not None:
@@ -257,7 +280,7 @@ class HubDiscovery:
         from wott_hub.drivers.base import Health
 
         device_id = self.adopted.get(found.id)
-        dev = self.hub.devices.get(device_id) if device_id is not None else None
+        dev = self.hub.device(device_id) if device_id is not None else None
         if dev is None:
             return
         reason = "no longer announced (mDNS goodbye or deleted from its directory)"

@@ -1,5 +1,8 @@
 """``hub.network``: the directory, the registrations and mDNS, fed by what the hub serves.
 
+It is given a ``HubPort`` (port.py) and its two config tables; it never
+imports the hub.
+
 The hub exposes and removes Things in several places (devices, the hub Thing,
 replays started from the CLI or by the hub Thing's action, adopted devices);
 all of them go through ``HubServer.expose`` and ``HubServer.remove``. The
@@ -17,8 +20,10 @@ from .directory import HubDirectory
 from .discovery import HubDiscovery
 
 if TYPE_CHECKING:
-    from wott_hub.hub import Hub
     from wott_hub.servient import ServedThing
+
+    from .config import DirectoryConfig, DiscoveryConfig
+    from .port import HubPort
 
 __all__ = ["HubNetwork"]
 
@@ -26,18 +31,16 @@ log = logging.getLogger("wott_hub.network")
 
 
 class HubNetwork:
-    def __init__(self, hub: Hub) -> None:
-        cfg = hub.config
+    def __init__(self, hub: HubPort, directory: DirectoryConfig, discovery: DiscoveryConfig) -> None:
         self.hub = hub
         self.own_ids: set[str] = set()
         """TD ids of every Thing the hub serves and of its directory: discovery never adopts them."""
-        d = cfg.directory
+        d = directory
         self.directory = HubDirectory(hub, d) if d.enabled or d.register_to else None
-        s = cfg.discovery
+        s = discovery
         self.discovery = HubDiscovery(hub, s, self.own_ids) if s.mdns or s.browse or s.directories else None
         self.started = False
-        hub.server.on_expose.append(self._exposed)
-        hub.server.on_remove.append(self._removed)
+        hub.listen(self._exposed, self._removed)
 
     def _exposed(self, served: ServedThing) -> None:
         tid = served.td.get("id")
@@ -52,7 +55,7 @@ class HubNetwork:
 
     def _removed(self, served: ServedThing) -> None:
         tid = served.td.get("id")
-        if tid in self.own_ids and not any(t.td.get("id") == tid for t in self.hub.server.things):
+        if tid in self.own_ids and not any(t.td.get("id") == tid for t in self.hub.served()):
             self.own_ids.discard(tid)
         if not self.started:
             return
@@ -69,7 +72,7 @@ class HubNetwork:
                 self.own_ids.add(self.directory.directory.own_id)
         self.started = True
         if self.discovery is not None:
-            port = self.hub.server.http_port if self.directory is not None and \
+            port = self.hub.http_port if self.directory is not None and \
                 self.directory.directory is not None else None
             await self.discovery.start(port)
 

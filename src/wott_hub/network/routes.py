@@ -48,7 +48,7 @@ class DirectoryRouter(Router):
         self.rules: list[tuple[PathMatches, type, dict[str, Any]]] = []
         self._pending: set[asyncio.Task[None]] = set()
 
-    def install(self, routes: list[tuple]) -> None:
+    def install(self, routes: list[tuple[Any, ...]]) -> None:
         """The directory's route table (``directory_handlers(directory)``); requests then reach it."""
         self.rules = [(PathMatches(pattern), cls, kwargs) for pattern, cls, kwargs in routes]
 
@@ -105,9 +105,11 @@ class _Held(httputil.HTTPMessageDelegate):
         if self.closed:
             return
         real = self.real = self.router.delegate(self.request)
-        for step in (lambda: real.headers_received(self.start_line, self.headers),
-                     *(lambda c=c: real.data_received(c) for c in self.chunks)):
-            result = step()
+        result = real.headers_received(self.start_line, self.headers)
+        if inspect.isawaitable(result):
+            await result
+        for chunk in self.chunks:
+            result = real.data_received(chunk)
             if inspect.isawaitable(result):
                 await result
         real.finish()

@@ -1,6 +1,6 @@
 """The driver plugin system (pluggy, modelled on datasette's): see docs/plugins.md.
 
-Plugins are modules registered under the ``wott_hub.drivers`` entry-point
+Plugins are modules registered under the ``wott-hub`` entry-point
 group; they implement the hooks of ``hookspecs`` with ``@hookimpl``. The hub
 talks to them only through the ``Registry``.
 """

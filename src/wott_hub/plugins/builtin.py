@@ -9,40 +9,46 @@ with real hardware live in their own distributions under ``plugins/``.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any, ClassVar, Literal
 
+from wott_hub.configspec import says
+from wott_hub.drivers.base import Driver
 from wott_hub.tactile.materials import MATERIALS
 
 from . import wot_remote
 from .hookspecs import hookimpl
 from .model import DeviceConfig, FamilyInfo
 from .naming import naming_device
+from .settings import Meta, SettingsModel, read_settings, settings_schema
 
 FAMILY = "scene"
 
-SCHEMA: dict[str, Any] = {
-    "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "type": "object",
-    "properties": {
-        "title": {"type": "string", "description": "Human-readable name (default: the device id)."},
-        "shape": {"enum": ["barrel", "flat", "cylinder"], "default": "flat",
-                  "description": "Example skin to play the scene on (wott-hub td show --shape)."},
-        "scene": {"type": "string",
-                  "description": "Scene TOML file (docs/scenes.md), relative to the working folder."},
-        "step": {"type": "array", "items": {"type": "object"}, "minItems": 1,
-                 "description": "Inline scene steps, as [[device.step]] tables, instead of a scene file."},
-        "loop": {"type": "boolean", "description": "With inline steps: replay forever.", "default": True},
-        "rate_hz": {"type": "number", "exclusiveMinimum": 0, "default": 120.0,
-                    "description": "Frames per second."},
-        "realtime": {"type": "boolean", "default": True,
-                     "description": "Pace frames on the clock; false yields them as fast as they are read."},
-        "material": {"enum": sorted(MATERIALS), "description": "Skin material; default: the example skin's."},
-        "epsilon_mm": {"type": "number", "exclusiveMinimum": 0,
-                       "description": "Deformation threshold ε in mm; default: the example skin's."},
-    },
-    "additionalProperties": False,
-    "oneOf": [{"required": ["scene"]}, {"required": ["step"]}],
-}
+
+class SceneSettings(SettingsModel):
+    """A ``scene`` device's settings, declared once (bounds, defaults, descriptions); ``SCHEMA``
+    is derived for docs and the registry. Exactly one of ``scene`` and ``step`` is given."""
+
+    json_schema_extra: ClassVar[dict[str, Any]] = {"oneOf": [{"required": ["scene"]}, {"required": ["step"]}]}
+
+    title: Annotated[str, Meta(description="Human-readable name (default: the device id).")] | None = None
+    shape: Annotated[Literal["barrel", "flat", "cylinder"], Meta(
+        description="Example skin to play the scene on (wott-hub td show --shape).")] = "flat"
+    scene: Annotated[str, Meta(
+        description="Scene TOML file (docs/scenes.md), relative to the working folder.")] | None = None
+    step: Annotated[list[dict[str, Any]], Meta(min_length=1, description=(
+        "Inline scene steps, as [[device.step]] tables, instead of a scene file."))] | None = None
+    loop: Annotated[bool, Meta(description="With inline steps: replay forever.")] = True
+    rate_hz: Annotated[float, says("a finite number", gt=0, le=10_000,
+                                   description="Frames per second.")] = 120.0
+    realtime: Annotated[bool, Meta(
+        description="Pace frames on the clock; false yields them as fast as they are read.")] = True
+    material: Annotated[str, Meta(extra_json_schema={"enum": sorted(MATERIALS)},
+                                  description="Skin material; default: the example skin's.")] | None = None
+    epsilon_mm: Annotated[float, Meta(gt=0, le=100, description=(
+        "Deformation threshold ε in mm; default: the example skin's."))] | None = None
+
+
+SCHEMA: dict[str, Any] = settings_schema(SceneSettings)
 
 
 @hookimpl
@@ -50,16 +56,15 @@ def wott_hub_families() -> list[FamilyInfo]:
     return [FamilyInfo(
         FAMILY,
         "Ground truth of a scripted scene on an example skin, no raw signal (benchmarks, tests).",
-        SCHEMA,
+        SceneSettings,
     ), wot_remote.family()]
 
 
 @hookimpl
-def wott_hub_open_device(config: DeviceConfig):
+def wott_hub_open_device(config: DeviceConfig) -> Driver:
+    # Called only for this plugin's two families: which of them is the only question.
     if config.family == wot_remote.FAMILY:
         return wot_remote.open_device(config)
-    if config.family != FAMILY:
-        return None
     from dataclasses import replace
 
     from wott_hub.drivers.base import DriverError
@@ -67,23 +72,28 @@ def wott_hub_open_device(config: DeviceConfig):
     from wott_hub.examples import example_device
     from wott_hub.sim.scene import Scene, SceneError
 
-    s = config.settings
     with naming_device(config):
+        s = read_settings(SceneSettings, config.settings)
+        if (s.scene is None) == (s.step is None):  # the registry's schema says so too; opened directly
+            raise DriverError("setting 'scene': needs one of 'scene' or 'step'" if s.scene is None
+                              else "setting 'scene': give only one of 'scene' or 'step'")
+        if s.material is not None and s.material not in MATERIALS:
+            raise DriverError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
         try:
-            if "scene" in s:
-                scene = Scene.load(s["scene"])
+            if s.scene is not None:
+                scene = Scene.load(s.scene)
             else:
-                scene = Scene.from_dict({"scene": {"name": config.id, "loop": s["loop"]}, "step": s["step"]},
+                scene = Scene.from_dict({"scene": {"name": config.id, "loop": s.loop}, "step": s.step},
                                         source=f"device {config.id!r} step")
         except SceneError as e:
             raise DriverError(f"setting 'scene': {e}") from None
-    desc = example_device(s["shape"], device_id=config.id)
-    changes: dict[str, Any] = {"family": FAMILY, "title": s.get("title", config.id)}
-    if "material" in s:
-        changes["material"] = MATERIALS[s["material"]]
-    if "epsilon_mm" in s:
-        changes["epsilon_mm"] = float(s["epsilon_mm"])
-    return SceneDriver(replace(desc, **changes), scene, float(s["rate_hz"]), realtime=bool(s["realtime"]))
+    desc = example_device(s.shape, device_id=config.id)
+    changes: dict[str, Any] = {"family": FAMILY, "title": config.id if s.title is None else s.title}
+    if s.material is not None:
+        changes["material"] = MATERIALS[s.material]
+    if s.epsilon_mm is not None:
+        changes["epsilon_mm"] = s.epsilon_mm
+    return SceneDriver(replace(desc, **changes), scene, s.rate_hz, realtime=s.realtime)
 
 
 @hookimpl

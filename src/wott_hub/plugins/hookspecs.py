@@ -1,8 +1,10 @@
+# mypy: disable-error-code="empty-body"
+# (specs are bare stubs, as in datasette: pluggy calls the plugins' implementations, never these)
 """The hooks a wott-hub driver plugin can implement (documented for users in docs/plugins.md).
 
-A plugin is a module registered under the ``wott_hub.drivers`` entry-point
+A plugin is a module registered under the ``wott-hub`` entry-point
 group; it implements any subset of these hooks with functions of the same name
-decorated with ``wott_hub.plugins.hookimpl``. An implementation may accept
+decorated with ``wott_hub.plugin_api.hookimpl``. An implementation may accept
 fewer arguments than the spec lists (pluggy passes only those it names).
 
 Every call is isolated per plugin: if one plugin's implementation raises, the
@@ -36,20 +38,23 @@ def wott_hub_families() -> list[FamilyInfo]:
     ``wott-hub plugins list``). Return a list of ``FamilyInfo(name,
     description, schema)``: ``name`` is what a device's ``family`` key refers
     to (unique across all plugins; a later plugin claiming a taken name gets an
-    error), ``schema`` a JSON Schema (draft 2020-12) of the device's settings.
-    Keep it cheap: import no camera or model libraries here.
+    error), ``schema`` the family's settings model (a ``SettingsModel`` class,
+    defined at module level; the registry derives its JSON Schema) or, the
+    compatibility path for older plugins, a JSON Schema (draft 2020-12) dict of
+    the device's settings. Keep it cheap: import no camera or model libraries here.
     """
 
 
 @hookspec(firstresult=True)
-def wott_hub_open_device(config: DeviceConfig) -> Driver | None:
+def wott_hub_open_device(config: DeviceConfig) -> Driver:
     """Open one device of a family this plugin provides.
 
     Called by ``Registry.open_device`` for the plugin that provides
-    ``config.family`` only, after ``config.settings`` has been validated
-    against the family's schema and completed with the schema's top-level
-    defaults. Return a ``Driver`` (not yet started: it starts when the hub
-    iterates ``frames()``), or None if the family is not this plugin's. Raise
+    ``config.family`` only (the registry dispatches by family: never check
+    it again here), after ``config.settings`` has been validated against the
+    family's model (or schema) and completed with its defaults.
+    Return a ``Driver`` (not yet started: it starts when the hub iterates
+    ``frames()``); anything else is an error of the plugin. Raise
     ``DriverError`` with a message naming the setting at fault when the device
     cannot be opened with these settings. Do not block here: the transport is
     opened and kept alive inside the driver.

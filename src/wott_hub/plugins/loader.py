@@ -24,7 +24,9 @@ from typing import Any
 
 __all__ = ["ENTRY_POINT_GROUP", "ENV_VAR", "Candidate", "describe_exception", "discover", "selected_names"]
 
-ENTRY_POINT_GROUP = "wott_hub.drivers"
+# Named after the project, not a module (like datasette's "datasette"): the group is a
+# registration key that outlives any reorganisation of the packages.
+ENTRY_POINT_GROUP = "wott-hub"
 ENV_VAR = "WOTT_HUB_PLUGINS"
 _IMPORTLIB_DIR = os.path.dirname(importlib.__file__)
 

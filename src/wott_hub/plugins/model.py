@@ -53,11 +53,16 @@ class FamilyInfo:
     defaults in before the plugin sees the settings, and ``wott-hub plugins
     families`` shows the descriptions to users. ``plugin`` is filled in by the
     registry; a plugin leaves it empty.
+
+    ``schema`` may instead be, and for every first-party family is, a settings model
+    (``wott_hub.plugins.settings.SettingsModel``, a msgspec Struct whose fields carry their
+    bounds): the registry replaces it with the model's JSON Schema and checks every device's
+    settings against the model itself. The dict form stays for third-party plugins.
     """
 
     name: str
     description: str
-    schema: dict[str, Any]
+    schema: dict[str, Any] | type[Any]
     plugin: str = ""
 
     def to_dict(self) -> dict[str, Any]:

@@ -4,27 +4,37 @@ Each hook is called with pluggy, but one plugin at a time (a subset hook
 caller holding only that plugin), in pluggy's own call order. A plugin whose
 hook raises, or returns something that is not what the hook promises, gets
 the error recorded against it and is skipped for that call; the other
-plugins' results stand. One plugin cannot take down the hub.
+plugins' results stand. One plugin cannot take down the hub. Every hook call
+goes through ``isolation.attempt``, the mechanism the hub uses for every call
+into a driver too; each distinct error is logged once (with its traceback).
 """
 
 from __future__ import annotations
 
 import copy
+import logging
 import threading
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pluggy
 
 from wott_hub.drivers.base import Driver, DriverError
 
 from . import hookspecs
+from .isolation import Fault, attempt
 from .loader import ENTRY_POINT_GROUP, describe_exception, discover, selected_names
 from .model import DeviceConfig, FamilyInfo, PluginInfo
-from .settings import with_defaults
+from .settings import model_settings, settings_schema, with_defaults
 
-__all__ = ["BUILTIN_PLUGINS", "Registry", "get_registry", "reset_registry"]
+if TYPE_CHECKING:
+    from jsonschema.exceptions import SchemaError
+    from jsonschema.protocols import Validator
+
+__all__ = ["BUILTIN_PLUGINS", "Registry", "get_registry", "loaded_registry", "reset_registry"]
+
+log = logging.getLogger("wott_hub.plugins")
 
 # Plugins inside the core package (like datasette's default plugins): always loaded.
 BUILTIN_PLUGINS = {"builtin": "wott_hub.plugins.builtin"}
@@ -66,6 +76,7 @@ class Registry:
         self._callers: dict[tuple[str, str], Any] = {}
         self._families: dict[str, FamilyInfo] | None = None
         self._validators: dict[str, Any] = {}
+        self._models: dict[str, type[Any]] = {}  # families declared as a settings model (settings.py)
         if builtins:
             import importlib
 
@@ -110,13 +121,17 @@ class Registry:
             return self._info(rec)
 
     # -- calling hooks, one plugin at a time -----------------------------------
-    def _record_error(self, plugin: str, hook: str, message: str) -> None:
-        """Keep each distinct message once (a hook failing on every call must not grow memory)."""
+    def _record_error(self, plugin: str, hook: str, message: str, fault: Fault | None = None) -> None:
+        """Keep each distinct message once (a hook failing on every call must not grow memory), and log
+        it when it is new (``fault``: with the traceback)."""
         with self._lock:
             messages = self._records[plugin].errors.setdefault(hook, [])
-            if message not in messages:
-                messages.append(message)
-                del messages[:-_MAX_ERRORS_PER_HOOK]
+            if message in messages:
+                return
+            messages.append(message)
+            del messages[:-_MAX_ERRORS_PER_HOOK]
+        exc_info = None if fault is None else (type(fault.error), fault.error, fault.error.__traceback__)
+        log.error("plugin %s: %s %s", plugin, hook, message, exc_info=exc_info)
 
     def _caller(self, hook: str, plugin: Any, name: str) -> Any:
         key = (hook, name)
@@ -140,16 +155,15 @@ class Registry:
                 continue
             done.append(impl.plugin)
             name = impl.plugin_name
-            try:
-                args = copy.deepcopy(kwargs) if copy_args else kwargs
-                out = self._caller(hook, impl.plugin, name)(**args)
-            except Exception as e:
-                self._record_error(name, hook, f"raised {describe_exception(e)}")
+            args = copy.deepcopy(kwargs) if copy_args else kwargs
+            out = attempt(f"{hook}()", self._caller(hook, impl.plugin, name), **args)
+            if out.fault is not None:
+                self._record_error(name, hook, f"raised {out.fault.detail}", out.fault)
                 continue
             if firstresult:
-                yield name, out
+                yield name, out.value
             else:
-                for value in out:
+                for value in out.value or ():  # no fault: the hook's list
                     yield name, value
 
     # -- families ------------------------------------------------------------
@@ -178,10 +192,11 @@ class Registry:
             for result in answers[name]:
                 self._accept_families(name, result, found, Draft202012Validator, SchemaError)
         self._validators.clear()
+        self._models = {n: m for n, m in self._models.items() if n in found}
         return found
 
     def _accept_families(self, name: str, result: Any, found: dict[str, FamilyInfo],
-                         validator_cls: Any, schema_error: type[Exception]) -> None:
+                         validator_cls: type[Validator], schema_error: type[SchemaError]) -> None:
         hook = "wott_hub_families"
         if not isinstance(result, list | tuple):
             self._record_error(name, hook, f"returned {type(result).__name__}, not a list of FamilyInfo")
@@ -190,8 +205,17 @@ class Registry:
             if not isinstance(fam, FamilyInfo):
                 self._record_error(name, hook, f"returned a {type(fam).__name__}, not a FamilyInfo")
                 continue
+            model = fam.schema if isinstance(fam.schema, type) else None
+            schema = fam.schema
+            if isinstance(schema, type):  # a settings model: its JSON Schema for docs and the first check
+                try:
+                    schema = settings_schema(schema)
+                except Exception as e:
+                    self._record_error(name, hook, f"family {fam.name!r}: invalid settings model: {e}")
+                    continue
+                fam = replace(fam, schema=schema)
             try:
-                validator_cls.check_schema(fam.schema)
+                validator_cls.check_schema(schema)
             except schema_error as e:
                 self._record_error(name, hook, f"family {fam.name!r}: invalid settings schema: {e.message}")
                 continue
@@ -200,6 +224,8 @@ class Registry:
                                                f"{found[fam.name].plugin!r}")
                 continue
             found[fam.name] = replace(fam, plugin=name)
+            if model is not None:
+                self._models[fam.name] = model
             self._records[name].families.append(fam.name)
 
     # -- devices -------------------------------------------------------------
@@ -211,17 +237,25 @@ class Registry:
             known = ", ".join(sorted(families)) or "none"
             raise DriverError(f"device {cfg.id!r}: unknown family {cfg.family!r} "
                               f"(installed families: {known})")
+        schema = info.schema
+        assert isinstance(schema, dict)  # a settings model became its JSON Schema when accepted
         validator = self._validators.get(cfg.family)
         if validator is None:
             from jsonschema import Draft202012Validator
 
-            validator = self._validators[cfg.family] = Draft202012Validator(info.schema)
+            validator = self._validators[cfg.family] = Draft202012Validator(schema)
         from jsonschema.exceptions import best_match
 
         error = best_match(validator.iter_errors(cfg.settings))
         if error is not None:
             raise DriverError(_explain(cfg, error))
-        return replace(cfg, settings=with_defaults(info.schema, cfg.settings))
+        from .naming import naming_device
+
+        model = self._models.get(cfg.family)
+        with naming_device(cfg):  # NaN, infinities and numbers beyond any bound (plugins/settings.py)
+            if model is not None:  # the model's bounds and defaults; the plugin gets plain values
+                return replace(cfg, settings=model_settings(model, cfg.settings))
+            return replace(cfg, settings=with_defaults(schema, cfg.settings))
 
     def open_device(self, cfg: DeviceConfig) -> Driver:
         """Open ``cfg`` through the plugin of its family; DriverError names the setting at fault.
@@ -237,14 +271,14 @@ class Registry:
         if not any(impl.plugin is rec.plugin for impl in getattr(self.pm.hook, hook).get_hookimpls()):
             raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} provides family {cfg.family!r} "
                               f"but does not implement {hook}")
-        try:
-            driver = self._caller(hook, rec.plugin, plugin)(config=cfg)
-        except DriverError:
-            raise
-        except Exception as e:
-            msg = f"raised {describe_exception(e)}"
-            self._record_error(plugin, hook, msg)
-            raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} {msg}") from e
+        out = attempt(f"{hook}()", self._caller(hook, rec.plugin, plugin), config=cfg)
+        if out.fault is not None:
+            if isinstance(out.fault.error, DriverError):  # the device's problem, in the plugin's words
+                raise out.fault.error
+            msg = f"raised {out.fault.detail}"
+            self._record_error(plugin, hook, msg, out.fault)
+            raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} {msg}") from out.fault.error
+        driver = out.value
         if not isinstance(driver, Driver):
             msg = f"returned {type(driver).__name__} for device {cfg.id!r}, not a Driver"
             self._record_error(plugin, hook, msg)
@@ -296,6 +330,13 @@ class Registry:
         return None
 
     # -- reporting -----------------------------------------------------------
+    def failed_plugins(self) -> dict[str, str]:
+        """The plugins that could not be loaded or registered, with why (for ``wott-hub run`` and the
+        hub's health); cheap: no hook is called."""
+        with self._lock:
+            return {key: "; ".join(m for k in ("load", "register") for m in rec.errors.get(k, ()))
+                    for key, rec in self._records.items() if "load" in rec.errors or "register" in rec.errors}
+
     def plugins(self) -> list[PluginInfo]:
         """Every plugin seen: loaded ones with their families and hooks, failed ones with their error."""
         self.families()  # a plugin's families (and errors in providing them) are part of its report
@@ -397,6 +438,11 @@ def get_registry() -> Registry:
         if _registry is None:
             _registry = Registry()
         return _registry
+
+
+def loaded_registry() -> Registry | None:
+    """The process's registry if something has loaded it already, else None (no plugin is imported)."""
+    return _registry
 
 
 def reset_registry() -> None:

@@ -16,42 +16,51 @@ wins it.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any, ClassVar
 
 from slugify import slugify
 
-from wott_hub.drivers.remote import FAMILY, tactile_affordances
+from wott_hub.drivers.remote import FAMILY, RemoteWoTDriver, tactile_affordances
 
 from .model import DeviceConfig, FamilyInfo
+from .naming import naming_device
+from .settings import Meta, SettingsModel, read_settings, settings_schema
 
-__all__ = ["FAMILY", "SCHEMA", "claim_td", "family", "open_device"]
+__all__ = ["FAMILY", "SCHEMA", "RemoteSettings", "claim_td", "family", "open_device"]
 
-SCHEMA: dict[str, Any] = {
-    "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "type": "object",
-    "properties": {
-        "url": {"type": "string", "description": "URL of the device's Thing Description (http or https)."},
-        "td": {"type": "object", "description": "The device's TD itself (what discovery passes)."},
-        "title": {"type": "string", "description": "Title of the re-exposed device (default: the TD's)."},
-        "timeout_s": {"type": "number", "exclusiveMinimum": 0, "default": 5.0,
-                      "description": "Connect and property-read timeout, seconds."},
-        "idle_timeout_s": {"type": "number", "exclusiveMinimum": 0, "default": 60.0,
-                           "description": "Reconnect (resuming) after this long without a byte on the "
-                                          "event stream; a wott-hub sends a heartbeat every 15 s."},
-        "epsilon_mm": {"type": "number", "exclusiveMinimum": 0,
-                       "description": "Deformation threshold ε; default: the TD's tac:epsilon less one "
-                                      "rounding step of the packets."},
-        "thickness_mm": {"type": "number", "exclusiveMinimum": 0, "default": 3.0,
-                         "description": "Skin thickness for the force model (not in a Tactile TD)."},
-    },
-    "additionalProperties": False,
-    "oneOf": [{"required": ["url"]}, {"required": ["td"]}],
-}
+class RemoteSettings(SettingsModel):
+    """A ``wot-remote`` device's settings, declared once; ``SCHEMA`` is derived for docs and the
+    registry. Exactly one of ``url`` and ``td`` is given."""
+
+    json_schema_extra: ClassVar[dict[str, Any]] = {"oneOf": [{"required": ["url"]}, {"required": ["td"]}]}
+
+    url: Annotated[str, Meta(
+        description="URL of the device's Thing Description (http or https).")] | None = None
+    td: Annotated[dict[str, Any], Meta(
+        description="The device's TD itself (what discovery passes).")] | None = None
+    title: Annotated[str, Meta(
+        description="Title of the re-exposed device (default: the TD's).")] | None = None
+    token: Annotated[str, Meta(min_length=1, description=(
+        "Bearer token for a device or hub whose TD declares bearer security "
+        "(another wott-hub: a read token; docs/security.md)."))] | None = None
+    timeout_s: Annotated[float, Meta(gt=0, le=3600, description=(
+        "Connect and property-read timeout, seconds."))] = 5.0
+    idle_timeout_s: Annotated[float, Meta(gt=0, le=86_400, description=(
+        "Reconnect (resuming) after this long without a byte on the "
+        "event stream; a wott-hub sends a heartbeat every 15 s."))] = 60.0
+    epsilon_mm: Annotated[float, Meta(gt=0, le=100, description=(
+        "Deformation threshold ε; default: the TD's tac:epsilon less one "
+        "rounding step of the packets."))] | None = None
+    thickness_mm: Annotated[float, Meta(gt=0, le=100, description=(
+        "Skin thickness for the force model (not in a Tactile TD)."))] = 3.0
+
+
+SCHEMA: dict[str, Any] = settings_schema(RemoteSettings)
 
 
 def family() -> FamilyInfo:
     return FamilyInfo(FAMILY, "A tactile device that speaks WoT itself (Tactile TD over HTTP + SSE), "
-                              "found by discovery or given by the URL of its TD.", SCHEMA)
+                              "found by discovery or given by the URL of its TD.", RemoteSettings)
 
 
 def claim_td(td: dict[str, Any]) -> DeviceConfig | None:
@@ -64,10 +73,9 @@ def claim_td(td: dict[str, Any]) -> DeviceConfig | None:
     return DeviceConfig(device_id, FAMILY, {"td": td})
 
 
-def open_device(config: DeviceConfig):
-    from wott_hub.drivers.remote import RemoteWoTDriver
-
-    s = config.settings
-    return RemoteWoTDriver(config.id, td=s.get("td"), url=s.get("url"), title=s.get("title"),
-                           timeout_s=float(s["timeout_s"]), idle_timeout_s=float(s["idle_timeout_s"]),
-                           epsilon_mm=s.get("epsilon_mm"), thickness_mm=float(s["thickness_mm"]))
+def open_device(config: DeviceConfig) -> RemoteWoTDriver:
+    with naming_device(config):
+        s = read_settings(RemoteSettings, config.settings)
+    return RemoteWoTDriver(config.id, td=s.td, url=s.url, title=s.title, timeout_s=s.timeout_s,
+                           idle_timeout_s=s.idle_timeout_s, epsilon_mm=s.epsilon_mm,
+                           thickness_mm=s.thickness_mm, token=s.token)

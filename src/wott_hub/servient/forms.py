@@ -5,7 +5,7 @@ re-serving a TD under this hub's layout, and removing what wotpy writes that cli
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import Any, TypeVar
 
 from wott_hub.td.forms import PREFIX, FormLayout
 
@@ -21,13 +21,16 @@ def with_forms(td: dict[str, Any], thing: str, layout: FormLayout) -> dict[str, 
             aff["forms"] = factory(kind, name, aff)
     out["forms"] = layout.thing_forms(thing)
     out["base"] = f"{layout.http_base}/"
+    if layout.mqtt is not None:  # its forms use the binding template's mqv: terms
+        layout.mqtt.add_context(out)
     return clean_td(out)
 
 
 _PLACEHOLDERS = ("oneOf", "anyOf", "allOf", "enum")
+_Node = TypeVar("_Node")
 
 
-def clean_td(node: Any, *, in_forms: bool = False) -> Any:
+def clean_td(node: _Node, *, in_forms: bool = False) -> _Node:
     """Drop empty placeholder keywords (``"oneOf": []``...) that wotpy writes into data schemas.
 
     They are invalid JSON Schema and make node-wot reject property values; an

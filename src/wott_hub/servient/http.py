@@ -12,48 +12,59 @@ import time
 from typing import Any
 
 import tornado.web
-from tornado.iostream import StreamClosedError
+from tornado.http1connection import HTTP1Connection
+from tornado.httputil import HTTPServerRequest
+from tornado.iostream import IOStream, StreamClosedError
 
-from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
+from wott_hub.errors import WottHubError, http_status
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
+from wott_hub.events.subscriber import Subscriber
 from wott_hub.td.builder import tactile_context
 from wott_hub.td.forms import CONTEXT_PATH
 
 from .context import ServingContext
 from .forms import PREFIX
+from .problem import MethodNotAllowed, write_problem
 from .things import ServedThing
 
-__all__ = ["routes"]
+__all__ = ["BaseHandler", "routes"]
 
 _CONTEXT_BYTES: bytes | None = None
 
 
-class _Base(tornado.web.RequestHandler):
-    def initialize(self, ctx: ServingContext) -> None:
-        self.ctx = ctx
+class BaseHandler(tornado.web.RequestHandler):
+    """For routes others mount on the hub's port (the hub Thing's actions): the same CORS headers and
+    problem+json errors as the hub's own. Each takes its own route kwargs (``initialize``)."""
 
     def set_default_headers(self) -> None:
         # browsers (the web twin, any WoT web client) read TDs and streams cross-origin
         self.set_header("Access-Control-Allow-Origin", "*")
 
-    def options(self, *_args) -> None:
+    def options(self, *_args: Any, **_kwargs: Any) -> None:  # routes pass named groups as kwargs
         self.set_header("Access-Control-Allow-Methods", "GET, OPTIONS")
         self.set_header("Access-Control-Allow-Headers", "Last-Event-ID, Accept, Content-Type")
         self.set_status(204)
-
-    def thing(self, thing_id: str) -> ServedThing:
-        thing = self.ctx.things.get(thing_id)
-        if thing is None:
-            raise tornado.web.HTTPError(404, reason=f"Unknown Thing {thing_id!r}")
-        return thing
 
     def write_json_text(self, text: str | bytes, content_type: str = "application/json") -> None:
         self.set_header("Content-Type", content_type)
         self.finish(text)
 
     def write_error(self, status_code: int, **kwargs: Any) -> None:
-        # problem+json, as the TD directory does, instead of tornado's HTML page
-        self.set_header("Content-Type", "application/problem+json")
-        self.finish(json.dumps({"title": self._reason, "status": status_code}))
+        # problem+json (RFC 9457), as the TD directory does, instead of tornado's HTML page
+        write_problem(self, status_code, **kwargs)
+
+
+class _Base(BaseHandler):
+    """The hub's own routes: they serve from the ``ServingContext``."""
+
+    def initialize(self, ctx: ServingContext) -> None:
+        self.ctx = ctx
+
+    def thing(self, thing_id: str) -> ServedThing:
+        thing = self.ctx.things.get(thing_id)
+        if thing is None:
+            raise tornado.web.HTTPError(404, reason=f"Unknown Thing {thing_id!r}")
+        return thing
 
 
 class CatalogueHandler(_Base):
@@ -90,6 +101,12 @@ class PropertyHandler(_Base):
             raise tornado.web.HTTPError(404, reason=f"Unknown property {name!r}")
         self.write_json_text(value)
 
+    def put(self, thing_id: str, name: str) -> None:
+        """Every property the hub serves is read-only: say so, naming it (405, Allow: GET)."""
+        if self.thing(thing_id).read(name) is None:
+            raise tornado.web.HTTPError(404, reason=f"Unknown property {name!r}")
+        raise MethodNotAllowed("GET, OPTIONS", f"Property {name!r} of {thing_id!r} is read-only")
+
     def compute_etag(self) -> None:
         return None
 
@@ -118,9 +135,13 @@ class _StreamHandler(_Base):
     Resume: ``Last-Event-ID`` (or ``?lastEventId=``) is the last seq the client
     has; it gets every later record of the stream, from memory or history,
     then the live ones, each exactly once. A long-poll given one gets the next.
+
+    Framing (``Record.sse``): a stream of one affordance sends unnamed messages,
+    which ``EventSource.onmessage`` (node-wot, most pages) receives; a stream of
+    all of a Thing's events names each message by its affordance.
     """
 
-    _sub = None
+    _sub: Subscriber | None = None
     _last_write = 0.0
     _ended = False
 
@@ -139,14 +160,18 @@ class _StreamHandler(_Base):
         sse = "text/event-stream" in self.request.headers.get("Accept", "")
         if not self.ctx.streams_ready.is_set():
             await self.ctx.streams_ready.wait()
-        sub = self._sub = self.ctx.plane.subscribe(thing.id, interest, after=after)
+        named = interest[1] is None  # several affordances on one stream: name each message
+        try:  # e.g. a resume that needs a history known to be corrupted: 503 before any byte
+            sub = self._sub = self.ctx.plane.subscribe(thing.id, interest, after=after)
+        except WottHubError as e:
+            raise tornado.web.HTTPError(http_status(e), reason=str(e)) from None
         self.ctx.sse.add(self)
         try:
             if not sse:
                 await self._long_poll(sub)
                 return
             # Nagle + delayed ACK would hold small event frames back by up to 40 ms
-            self.request.connection.stream.set_nodelay(True)
+            _iostream(self.request).set_nodelay(True)
             self.set_header("Content-Type", "text/event-stream; charset=utf-8")
             self.set_header("Cache-Control", "no-cache")
             self.set_header("X-Accel-Buffering", "no")
@@ -159,28 +184,32 @@ class _StreamHandler(_Base):
                                f"recorded\n\n".encode())
                     sub.gap = None
                 if batch[0].trace is None:
-                    self.write(b"".join([r.sse() for r in batch]))
+                    self.write(b"".join([r.sse(named) for r in batch]))
                 else:
-                    self._write_traced(batch)
+                    self._write_traced(batch, named)
                 self._last_write = time.monotonic()
                 await self.flush()
         except StreamClosedError:
             pass
+        except WottHubError as e:  # history failed mid-resume: say so, never end in silence
+            if not self._headers_written:
+                raise tornado.web.HTTPError(http_status(e), reason=str(e)) from None
+            self.write(f": error: {e}\n\n".encode())
         finally:
             sub.close()
             self.ctx.sse.discard(self)
-        if not self._finished and not self.request.connection.stream.closed():
+        if not self._finished and not _iostream(self.request).closed():
             self.finish()
 
-    def _write_traced(self, batch) -> None:
+    def _write_traced(self, batch: list[Record], named: bool) -> None:
         """Benchmarks only: stamp when each record was handed to the socket layer."""
-        self.write(b"".join([r.sse() for r in batch]))
+        self.write(b"".join([r.sse(named) for r in batch]))
         t = time.perf_counter_ns()
         for r in batch:
             if r.trace is not None:
                 r.trace["sse"] = t
 
-    async def _long_poll(self, sub) -> None:
+    async def _long_poll(self, sub: Subscriber) -> None:
         async for batch in sub.batches():
             rec = batch[0]
             self.set_header("X-Event-Id", str(rec.seq))
@@ -223,7 +252,14 @@ class PropertyObserveHandler(_StreamHandler):
         await self.stream(thing, (KIND_PROPERTY, name))
 
 
-def routes(ctx: ServingContext) -> list[tuple]:
+def _iostream(request: HTTPServerRequest) -> IOStream:
+    """The request's socket: tornado's HTTPServer serves every request over an HTTP1Connection."""
+    conn = request.connection
+    assert isinstance(conn, HTTP1Connection)
+    return conn.stream
+
+
+def routes(ctx: ServingContext) -> list[tuple[Any, ...]]:
     """The hub's routes, to put before wotpy's in the HTTP server's Application."""
     k = {"ctx": ctx}
     t = rf"{PREFIX}/(?P<thing_id>[^/]+)"

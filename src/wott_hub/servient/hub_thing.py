@@ -58,6 +58,8 @@ def hub_td(name: str, layout: FormLayout) -> dict[str, Any]:
                     "uptimeSeconds": {"type": "number", "unit": "s"},
                     "devices": {"type": "object"},
                     "history": {"type": "object"},
+                    "mqtt": {"type": "object",
+                             "description": "With [mqtt]: the broker link (state, counters)."},
                 },
                 "required": ["state", "devices"],
             },

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import Callable, Sequence
+import ssl
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
 
 import tornado.web
@@ -21,6 +22,9 @@ from wotpy.wot.exposed.thing import ExposedThing
 
 from wott_hub.events.plane import EventPlane
 from wott_hub.events.record import KIND_EVENT, Record
+from wott_hub.security.audit import AuditLog
+from wott_hub.security.gate import guard
+from wott_hub.security.policy import AccessPolicy
 from wott_hub.web import routes as web_routes  # the twin: / and /twin/*
 
 from .adapters import FastThing, HubHTTPServer, HubServient, HubWebsocketServer
@@ -68,20 +72,30 @@ def _wotpy_fragment(served: ServedThing) -> ThingFragment:
 class HubServer:
     def __init__(self, plane: EventPlane, *, host: str = "127.0.0.1", http_port: int = 8080,
                  ws_port: int | None = 8081, public_host: str | None = None, catalogue_port: int = 0,
-                 extra_handlers: Sequence[tuple] = ()) -> None:
+                 extra_handlers: Sequence[tuple[Any, ...]] = (), policy: AccessPolicy | None = None,
+                 ssl_context: ssl.SSLContext | None = None, audit: AuditLog | None = None) -> None:
         self.plane = plane
+        # who may do what (wott_hub.security): checked once per request/handshake by each server's app
+        self.policy = policy or AccessPolicy()
+        self.audit = audit
+        self.ssl_context = ssl_context
         self.host = host
         self.public_host = public_host or (host if host not in ALL_INTERFACES else "127.0.0.1")
         self.things = ThingRegistry()
         # told of every Thing served and removed, whoever does it (the hub's network: directory, mDNS)
         self.on_expose: list[Callable[[ServedThing], None]] = []
         self.on_remove: list[Callable[[ServedThing], None]] = []
-        self.ctx = ServingContext(plane, self.things, FormLayout(f"http://{self.public_host}:{http_port}"))
+        self.ctx = ServingContext(plane, self.things,
+                                  FormLayout(f"{self.policy.http_scheme}://{self.public_host}:{http_port}"))
         self.http = HubHTTPServer(http_port, host=host, handlers=[*extra_handlers, *routes(self.ctx),
                                                                      *web_routes()])
         self.ws = (HubWebsocketServer(ws_port, host=host, handler_class=FastWebsocketHandler,
                                       handler_kwargs={"ctx": self.ctx})
                    if ws_port is not None else None)
+        for server in (self.http, self.ws):
+            if server is not None:
+                guard(server.app, self.policy, audit)
+                server._ssl_context = ssl_context  # https/wss (wotpy servers read it when they start)
         self.servient = HubServient(self.public_host, catalogue_port=catalogue_port or None,
                                     catalogue_app=self._catalogue_app)
         self.servient.add_server(self.http)
@@ -96,8 +110,8 @@ class HubServer:
         http_port = self.http.bind()
         ws_base = None
         if self.ws is not None:
-            ws_base = f"ws://{self.public_host}:{self.ws.bind()}"
-        self.ctx.layout = FormLayout(f"http://{self.public_host}:{http_port}", ws_base)
+            ws_base = f"{self.policy.ws_scheme}://{self.public_host}:{self.ws.bind()}"
+        self.ctx.layout = FormLayout(f"{self.policy.http_scheme}://{self.public_host}:{http_port}", ws_base)
         return self.ctx.layout
 
     @property
@@ -106,7 +120,8 @@ class HubServer:
 
     @property
     def http_port(self) -> int:
-        return self.http.port
+        port: int = self.http.port
+        return port
 
     @property
     def ws_port(self) -> int | None:
@@ -130,20 +145,22 @@ class HubServer:
         await asyncio.sleep(0)  # let stream handlers finish their responses
         await self.servient.shutdown()
 
-    def add_handlers(self, rules: Sequence[tuple]) -> None:
+    def add_handlers(self, rules: Sequence[tuple[Any, ...]]) -> None:
         """Mount more routes on the hub's HTTP port (e.g. the TD directory)."""
         self.http.add_handlers(rules)
 
     def _catalogue_app(self) -> tornado.web.Application:
         """wotpy's catalogue port, same paths as wotpy's (``/``, ``/<name>``), from cached TDs."""
         k = {"ctx": self.ctx}
-        return tornado.web.Application([(r"/", CatalogueHandler, k),
-                                        (r"/(?P<thing_id>[^/]+)/?", TDHandler, k)])
+        app = tornado.web.Application([(r"/", CatalogueHandler, k),
+                                       (r"/(?P<thing_id>[^/]+)/?", TDHandler, k)])
+        return guard(app, self.policy, self.audit)
 
     # --- Things -------------------------------------------------------------------
 
     def expose(self, served: ServedThing) -> ExposedThing:
         """Serve a Thing on every binding. Its stream must already be on the event plane."""
+        self.policy.secure_td(served.td)  # its securityDefinitions say what the gate does
         thing = FastThing(_wotpy_fragment(served))
         exposed = ExposedThing(servient=self.servient, thing=thing)
         for name in served.property_names:
@@ -174,7 +191,7 @@ class HubServer:
         return self.layout.thing_url(thing_id)
 
 
-def _reader(served: ServedThing, name: str):
+def _reader(served: ServedThing, name: str) -> Callable[[], Awaitable[Any]]:
     async def read() -> Any:
         return json.loads(served.read(name) or "null")
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,7 +39,8 @@ class ServedThing:
 
     @property
     def title(self) -> str:
-        return self.td.get("title", self.id)
+        title: str = self.td.get("title", self.id)
+        return title
 
     @property
     def property_names(self) -> list[str]:
@@ -61,7 +62,9 @@ class ServedThing:
     @property
     def etag(self) -> str:
         self.td_bytes()
-        return self._etag  # type: ignore[return-value]
+        etag = self._etag
+        assert etag is not None  # td_bytes() sets it
+        return etag
 
     def read(self, name: str) -> str | None:
         """The encoded value of property ``name``; None if the Thing has no such property."""
@@ -74,7 +77,8 @@ class ServedThing:
         return value
 
     def read_all(self) -> str:
-        return _json_object((n, self.read(n)) for n in self.property_names)
+        # read() is None only for a name the TD lacks, and these names come from the TD
+        return _json_object((n, v) for n in self.property_names if (v := self.read(n)) is not None)
 
     def static_json(self) -> str:
         """The static values as one JSON object (what history records), spliced from the texts
@@ -113,7 +117,7 @@ class ThingRegistry:
     def get(self, thing_id: str) -> ServedThing | None:
         return self.by_id.get(thing_id)
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[ServedThing]:
         return iter(self.by_id.values())
 
     def __len__(self) -> int:

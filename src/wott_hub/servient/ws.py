@@ -25,17 +25,28 @@ methods, messages, subscription ids and error codes, so wotpy's
 
 Things not served by the hub (produced directly on the servient) fall back to
 wotpy's own handlers.
+
+Bad input never costs the connection: a message that does not parse (nested
+too deep for the decoder included) gets a JSON-RPC error reply, and any failure
+while handling one is answered ``INTERNAL_ERROR`` and logged; a URL naming no
+Thing is refused at the handshake with a problem+json 404. One connection holds
+at most ``MAX_SUBSCRIPTIONS`` subscriptions (hub and wotpy ones together): each
+costs a pump task and an event-plane subscriber, and an unbounded number on one
+socket slows every client of the hub. Beyond it a subscribe request gets an
+``INVALID_REQUEST`` error naming the limit; disposing one frees a place.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import struct
 import time
 import uuid
 from typing import Any
 
+import tornado.web
 from tornado.iostream import StreamClosedError
 from tornado.websocket import WebSocketClosedError
 from wotpy.protocols.ws.enums import WebsocketErrors, WebsocketMethods
@@ -43,16 +54,29 @@ from wotpy.protocols.ws.handler import WebsocketHandler
 from wotpy.protocols.ws.messages import WebsocketMessageRequest
 
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
+from wott_hub.events.subscriber import Subscriber
+from wott_hub.security.policy import allows
+from wott_hub.security.scopes import Scope
 
 from .context import ServingContext
+from .problem import write_problem
+from .things import ServedThing
 
-__all__ = ["FastWebsocketHandler"]
+__all__ = ["MAX_SUBSCRIPTIONS", "FastWebsocketHandler"]
+
+MAX_SUBSCRIPTIONS = 256
+"""Subscriptions one WebSocket connection may hold at once (a client needing more opens another)."""
+
+log = logging.getLogger(__name__)
+_SUBSCRIBE = frozenset({WebsocketMethods.ON_EVENT, WebsocketMethods.ON_PROPERTY_CHANGE,
+                        WebsocketMethods.ON_TD_CHANGE})
 
 _METHODS = frozenset(WebsocketMethods.list())
 _NEEDS_NAME = frozenset({WebsocketMethods.READ_PROPERTY, WebsocketMethods.WRITE_PROPERTY,
                          WebsocketMethods.INVOKE_ACTION, WebsocketMethods.ON_PROPERTY_CHANGE,
                          WebsocketMethods.ON_EVENT})
 _dumps = json.dumps
+_CONTROL = frozenset({WebsocketMethods.WRITE_PROPERTY, WebsocketMethods.INVOKE_ACTION})
 
 
 class _Invalid(Exception):
@@ -68,6 +92,8 @@ def _parse_request(raw: str | bytes) -> tuple[str, Any, Any]:
         msg = json.loads(raw)
     except (ValueError, TypeError) as e:
         raise _Invalid(f"Parse error: {e}", WebsocketErrors.PARSE_ERROR) from None
+    except RecursionError:
+        raise _Invalid("Parse error: nested too deeply", WebsocketErrors.PARSE_ERROR) from None
     if not isinstance(msg, dict):
         raise _Invalid("Invalid request: not an object", WebsocketErrors.INVALID_REQUEST)
     msg_id = msg.get("id")
@@ -117,8 +143,22 @@ def _error(message: str, code: int, msg_id: Any = None, data: Any = None) -> str
 class FastWebsocketHandler(WebsocketHandler):
     def initialize(self, ctx: ServingContext) -> None:
         self.ctx = ctx
-        self._hub_subs: dict[str, Any] = {}  # subscription id -> event-plane Subscriber
-        self._served = None
+        # subscription id -> event-plane Subscriber (None until the hub's streams are ready)
+        self._hub_subs: dict[str, Subscriber | None] = {}
+        self._wotpy_pending: set[asyncio.Future[Any]] = set()  # wotpy subscribe requests not yet run
+        self._served: ServedThing | None = None
+
+    def prepare(self) -> None:
+        """Refuse the handshake for a URL that names no Thing (wotpy would accept, then fail)."""
+        name = self.path_kwargs.get("name", "")
+        if name not in self.ctx.things.by_ws_name:
+            try:
+                self._server.get_exposed_thing(name)
+            except ValueError:
+                raise tornado.web.HTTPError(404, reason=f"Unknown Thing {name!r}") from None
+
+    def write_error(self, status_code: int, **kwargs: Any) -> None:
+        write_problem(self, status_code, **kwargs)
 
     def open(self, name: str) -> None:
         super().open(name)
@@ -132,16 +172,37 @@ class FastWebsocketHandler(WebsocketHandler):
         except WebSocketClosedError:
             pass
 
-    async def on_message(self, message) -> None:
+    async def on_message(self, message: str | bytes) -> None:
         try:
             method, params, msg_id = _parse_request(message)
         except _Invalid as e:
             self._send(_error(str(e), e.code, e.msg_id))
             return
+        if method in _SUBSCRIBE and self.subscription_count >= MAX_SUBSCRIPTIONS:
+            self._send(_error(f"Invalid request: this connection already holds {MAX_SUBSCRIPTIONS} "
+                              "subscriptions (the maximum); dispose one first",
+                              WebsocketErrors.INVALID_REQUEST, msg_id,
+                              {"maxSubscriptions": MAX_SUBSCRIPTIONS}))
+            return
+        if method in _CONTROL and not allows(self.request, Scope.CONTROL):  # scope of the handshake's token
+            self._send(_error(f"Forbidden: {method} needs a token with scope control",
+                              WebsocketErrors.INVALID_REQUEST, msg_id))
+            return
+        try:
+            self._dispatch(method, params, msg_id)
+        except Exception as e:  # a bug here must cost one reply, not the connection
+            log.exception("WebSocket request %s failed", method)
+            self._send(_error(f"Internal error: {type(e).__name__}", WebsocketErrors.INTERNAL_ERROR, msg_id))
+
+    @property
+    def subscription_count(self) -> int:
+        """Subscriptions this connection holds: the hub's (pending ones too) and wotpy's."""
+        return len(self._hub_subs) + len(self._subscriptions) + len(self._wotpy_pending)
+
+    def _dispatch(self, method: str, params: Any, msg_id: Any) -> None:
         served = self._served
         if served is None:  # a Thing produced directly on the servient: wotpy's own path
-            req = WebsocketMessageRequest(method=method, params=params, msg_id=msg_id)
-            asyncio.ensure_future(self._handle(req))
+            self._to_wotpy(method, params, msg_id)
             return
         if method == WebsocketMethods.READ_PROPERTY:
             value = served.read(params["name"])
@@ -166,9 +227,10 @@ class FastWebsocketHandler(WebsocketHandler):
                 self._subscribe(served.id, (KIND_PROPERTY, name), msg_id)
         elif method == WebsocketMethods.DISPOSE:
             sid = params["subscription"]
-            sub = self._hub_subs.pop(sid, None)
-            if sub is not None:
-                sub.close()
+            if sid in self._hub_subs:
+                sub = self._hub_subs.pop(sid)
+                if sub is not None:  # None: still waiting for the streams; its pump sees it is gone
+                    sub.close()
                 self._send(_response(_dumps(sid), msg_id))
             elif sid in self._subscriptions:
                 self._dispose_subscription(sid)
@@ -176,22 +238,28 @@ class FastWebsocketHandler(WebsocketHandler):
             else:
                 self._send(_response("null", msg_id))
         else:  # write_property, invoke_action, on_td_change: wotpy's semantics (rare, not hot)
-            req = WebsocketMessageRequest(method=method, params=params, msg_id=msg_id)
-            asyncio.ensure_future(self._handle(req))
+            self._to_wotpy(method, params, msg_id)
+
+    def _to_wotpy(self, method: str, params: Any, msg_id: Any) -> None:
+        """Hand a request to wotpy's handler; a subscription is counted at once, so the cap holds."""
+        req = WebsocketMessageRequest(method=method, params=params, msg_id=msg_id)
+        task = asyncio.ensure_future(self._handle(req))
+        if method in _SUBSCRIBE:
+            self._wotpy_pending.add(task)
+            task.add_done_callback(self._wotpy_pending.discard)
 
     def _subscribe(self, thing: str, interest: tuple[int, str], msg_id: Any) -> None:
         sid = str(uuid.uuid4())
         self._send(_response(_dumps(sid), msg_id))
-        if self.ctx.streams_ready.is_set():
-            sub = self.ctx.plane.subscribe(thing, interest)
-            self._hub_subs[sid] = sub
-        else:
-            sub = None
+        sub = self.ctx.plane.subscribe(thing, interest) if self.ctx.streams_ready.is_set() else None
+        self._hub_subs[sid] = sub
         asyncio.ensure_future(self._pump(sid, sub, thing, interest))
 
-    async def _pump(self, sid: str, sub, thing: str, interest: tuple[int, str]) -> None:
+    async def _pump(self, sid: str, sub: Subscriber | None, thing: str, interest: tuple[int, str]) -> None:
         if sub is None:  # the hub is still opening its history: subscribe once streams are ready
             await self.ctx.streams_ready.wait()
+            if sid not in self._hub_subs or self.ws_connection is None:  # disposed or closed meanwhile
+                return
             sub = self.ctx.plane.subscribe(thing, interest)
             self._hub_subs[sid] = sub
         kind, name = interest
@@ -210,7 +278,8 @@ class FastWebsocketHandler(WebsocketHandler):
                 if batch[0].trace is not None:  # benchmarks: when the batch goes to the socket
                     t = time.perf_counter_ns()
                     for r in batch:
-                        r.trace["ws"] = t
+                        if r.trace is not None:  # the whole batch is traced or none of it
+                            r.trace["ws"] = t
                 if getattr(conn, "_compressor", None) is None:
                     frames = b"".join([_text_frame((head + r.data + tail).encode()) for r in batch])
                     fut = conn.stream.write(frames)
@@ -230,7 +299,8 @@ class FastWebsocketHandler(WebsocketHandler):
 
     def on_close(self) -> None:
         for sub in list(self._hub_subs.values()):
-            sub.close()
+            if sub is not None:
+                sub.close()
         self._hub_subs.clear()
         self.ctx.ws.discard(self)
         super().on_close()

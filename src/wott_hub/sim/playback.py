@@ -3,11 +3,13 @@ for tests and benchmarks of processing without any transport."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from wott_hub.sim.scene import Scene
 from wott_hub.tactile import FrameProcessor, FrameResult, ProcessingParams, SkinMesh, TactileFrame
 
 
-def play(mesh: SkinMesh, steps: list[dict], seconds: float | None = None, rate_hz: float = 120.0,
+def play(mesh: SkinMesh, steps: list[dict[str, Any]], seconds: float | None = None, rate_hz: float = 120.0,
          params: ProcessingParams | None = None) -> list[FrameResult]:
     scene = Scene.from_dict({"step": steps})
     proc = FrameProcessor(mesh, params)

@@ -32,15 +32,19 @@ from __future__ import annotations
 import math
 import tomllib
 import weakref
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from wott_hub.tactile.indentation import Indenter, indent, nearest_node
 from wott_hub.tactile.materials import MATERIALS
 from wott_hub.tactile.mesh import SkinMesh
+
+if TYPE_CHECKING:  # the mechanics load only for kelvin-voigt scenes
+    from wott_hub.tactile.mechanics import Press, QuasiStatic
 
 __all__ = ["Scene", "SceneError", "SceneSimulator", "Step"]
 
@@ -194,7 +198,7 @@ class Scene:
         t = self._scene_time(t)
         return any(s.level_at(t) > 0 for s in self.steps)
 
-    def _touches(self, t: float, mesh: SkinMesh):
+    def _touches(self, t: float, mesh: SkinMesh) -> Iterator[tuple[Step, float, np.ndarray, np.ndarray]]:
         """(step, level, centre, shear) of every indenter touching the skin at scene time ``t``."""
         t = self._scene_time(t)
         for s in self.steps:
@@ -202,15 +206,16 @@ class Scene:
             if level <= 0:
                 continue
             u = (t - s.start_s) / s.duration_s
-            if s.kind == "slide":
-                a, b = _on_surface(mesh, s.at), _on_surface(mesh, s.to)
+            to = s.to  # a slide's and a pinch's, checked by from_dict
+            if s.kind == "slide" and to is not None:
+                a, b = _on_surface(mesh, s.at), _on_surface(mesh, to)
                 centre = _on_surface(mesh, a + u * (b - a))
                 direction = (b - a) / max(np.linalg.norm(b - a), 1e-9)
                 drag = s.shear_mm * level  # shear ramps in and out with the depth
                 yield s, level, centre, drag * direction
-            elif s.kind == "pinch":
-                a, b = _on_surface(mesh, s.at), _on_surface(mesh, s.to)
-                gap = np.linalg.norm(b - a)
+            elif s.kind == "pinch" and to is not None:
+                a, b = _on_surface(mesh, s.at), _on_surface(mesh, to)
+                gap = float(np.linalg.norm(b - a))
                 step = min(u * s.approach_mm, gap) / 2 / max(gap, 1e-9)
                 yield s, level, _on_surface(mesh, a + step * (b - a)), np.zeros(3)
                 yield s, level, _on_surface(mesh, b + step * (a - b)), np.zeros(3)
@@ -222,11 +227,11 @@ class Scene:
         return [Indenter(centre, s.depth_mm * level if s.force_n is None else 0.0, s.radius_mm, shear)
                 for s, level, centre, shear in self._touches(t, mesh)]
 
-    def presses_at(self, t: float, mesh: SkinMesh) -> list:
+    def presses_at(self, t: float, mesh: SkinMesh) -> list[Press]:
         """The same indenters as mechanics presses (sphere or flat punch, by depth or by force)."""
         from wott_hub.tactile.mechanics import FlatPunch, Sphere, press_on
 
-        out = []
+        out: list[Press] = []
         for s, level, centre, shear in self._touches(t, mesh):
             shape = FlatPunch(s.radius_mm) if s.indenter == "flat" else Sphere(s.radius_mm)
             sticky = shear if s.shear_mm > 0 else None
@@ -247,7 +252,7 @@ class Scene:
             return np.zeros_like(mesh.nodes)
         if self.model != "kelvin-voigt":
             return indent(mesh, self.indenters_at(t, mesh))
-        sim = self._simulators.get(mesh)
+        sim: SceneSimulator | None = self._simulators.get(mesh)
         if sim is None:
             sim = self._simulators[mesh] = SceneSimulator(self, mesh)
         return sim.displacement_at(t)
@@ -267,7 +272,7 @@ class SceneSimulator:
 
     def __init__(self, scene: Scene, mesh: SkinMesh, *, integrator: str = "quasi-static",
                  thickness_mm: float | None = None, frame_rate_hz: float = 120.0,
-                 refine: int | None = None, **skin) -> None:
+                 refine: int | None = None, **skin: Any) -> None:
         from wott_hub.tactile.mechanics import (
             MechanicsError,
             QuasiStatic,
@@ -291,7 +296,8 @@ class SceneSimulator:
                     raise SceneError(f"scene {scene.name!r}: step[{i}].depth_mm: {s.depth_mm} mm is deeper "
                                      f"than the {h:g} mm skin over its rigid backing")
         self.frame_s = 1.0 / frame_rate_hz
-        self._static = self.integrator if integrator == "quasi-static" else QuasiStatic(self.model)
+        integ = self.integrator
+        self._static: QuasiStatic = integ if isinstance(integ, QuasiStatic) else QuasiStatic(self.model)
         self.state = self._static.solve([], t=0.0)
 
     @property
@@ -300,7 +306,7 @@ class SceneSimulator:
 
     def displacement_at(self, t: float) -> np.ndarray:
         """(N, 3) displacement of the device mesh's nodes at scene time ``t``, mm."""
-        def presses(tt: float) -> list:
+        def presses(tt: float) -> list[Press]:
             return self.scene.presses_at(tt, self.mesh)
 
         if self.integrator is self._static:
@@ -326,4 +332,5 @@ def _on_surface(mesh: SkinMesh, point: np.ndarray) -> np.ndarray:
     """Project a point onto the tangent plane of its nearest node: smooth paths, on the skin."""
     k = nearest_node(mesh, point)
     n = mesh.normals[k]
-    return point - ((point - mesh.nodes[k]) @ n) * n
+    on_plane: np.ndarray = point - ((point - mesh.nodes[k]) @ n) * n
+    return on_plane

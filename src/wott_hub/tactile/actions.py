@@ -9,9 +9,22 @@ every device family. Each action is emitted once when its condition first holds:
 - ``slip``: the main contact moved tangentially more than ``slip_mm`` from where it
   settled, or its mean shear exceeded ``slip_shear_ratio`` x its mean normal depth.
   It re-arms when the contact comes to rest again.
-- ``pinch``: two contacts whose distance shrank by ``pinch_mm`` since both appeared.
+- ``pinch``: two contacts whose distance shrank by ``pinch_mm`` since both appeared,
+  each of them moving towards the other (at least a quarter of ``pinch_mm``). The
+  second contact must be a finger, not a ripple: at least ``pinch_peak_ratio`` of
+  the main contact's peak, and the same contact from frame to frame (neither
+  jumps more than ``pinch_jump_mm``; a jump restarts the count). So a slide under
+  shear, whose bulge and edge ripples come and go as small secondary contacts,
+  is no pinch (issue 14).
 - ``pat``: a touch shorter than ``pat_s`` (emitted just before its ``release``).
 - ``release``: the first frame with no contact after a touch.
+
+Each action comes with its evidence (``details``, the ``actionDetails`` event):
+the number of contacts, the touch's duration, the main contact's speed, and a
+confidence in [0.5, 1]: how clearly the deciding quantity crossed its
+threshold (0.5 at the threshold, 1 at twice the margin; touch and release are
+certain). It is kept as a few numbers per emitted action and turned into a
+payload only when someone listens (``FrameResult.action_details``).
 """
 
 from __future__ import annotations
@@ -23,7 +36,7 @@ import numpy as np
 
 from .contacts import Contact
 
-__all__ = ["ACTIONS", "ActionDetector", "ActionParams"]
+__all__ = ["ACTIONS", "ActionDetector", "ActionEvidence", "ActionParams"]
 
 ACTIONS = ("touch", "release", "press", "slip", "pat", "pinch", "collision")
 
@@ -36,7 +49,35 @@ class ActionParams:
     slip_shear_ratio: float = 1.0
     rest_speed_mm_s: float = 5.0
     pinch_mm: float = 3.0
+    pinch_peak_ratio: float = 0.3
+    pinch_jump_mm: float = 5.0
     collision_speed_mm_s: float = 150.0
+
+
+@dataclass(frozen=True, slots=True)
+class ActionEvidence:
+    """One emitted action and what it was taken on (the ``actionDetails`` event's data)."""
+
+    action: str
+    confidence: float
+    contacts: int
+    duration_s: float
+    speed_mm_s: float
+    moved_mm: float = 0.0
+    approach_mm: float = 0.0
+
+    def payload(self) -> dict[str, object]:
+        return {"action": self.action, "confidence": round(self.confidence, 3), "evidence": {
+            "contacts": self.contacts, "durationS": round(self.duration_s, 4),
+            "speedMmPerS": round(self.speed_mm_s, 3), "moveMm": round(self.moved_mm, 3),
+            "approachMm": round(self.approach_mm, 3)}}
+
+
+def _confidence(value: float, threshold: float) -> float:
+    """0.5 where ``value`` just crosses ``threshold`` (either way), 1 at twice the margin."""
+    if threshold <= 0:
+        return 1.0
+    return min(1.0, 0.5 + 0.5 * abs(value - threshold) / threshold)
 
 
 def _norm(v: np.ndarray) -> float:
@@ -58,9 +99,38 @@ class ActionDetector:
         self._slipping = False
         self._pressed = False
         self._pinch_d0: float | None = None
+        self._pinch_start: tuple[np.ndarray, np.ndarray] | None = None  # both fingers where they appeared
+        self._pinch_prev: tuple[np.ndarray, np.ndarray] | None = None
         self._pinched = False
+        self._speed = 0.0
+        self._moved = 0.0
+        self._approach = 0.0
+        self.details: list[ActionEvidence] = []  # the evidence of the actions the last update returned
 
     def update(self, t_ns: int, contacts: list[Contact]) -> list[str]:
+        onset = self._onset_ns
+        out = self._update(t_ns, contacts)
+        if out:  # rare: a few per touch
+            self.details = [self._evidence(a, t_ns, onset, contacts) for a in out]
+        elif self.details:
+            self.details = []
+        return out
+
+    def _evidence(self, action: str, t_ns: int, onset: int | None, contacts: list[Contact]) -> ActionEvidence:
+        p = self.p
+        start = self._onset_ns if self._onset_ns is not None else onset
+        duration = (t_ns - start) / 1e9 if start is not None else 0.0
+        conf = {
+            "touch": 1.0, "release": 1.0,
+            "collision": _confidence(self._speed, p.collision_speed_mm_s),
+            "press": _confidence(self._speed, p.rest_speed_mm_s),
+            "slip": max(_confidence(self._moved, p.slip_mm), 0.5),
+            "pat": _confidence(duration, p.pat_s),
+            "pinch": _confidence(self._approach, p.pinch_mm),
+        }.get(action, 1.0)
+        return ActionEvidence(action, conf, len(contacts), duration, self._speed, self._moved, self._approach)
+
+    def _update(self, t_ns: int, contacts: list[Contact]) -> list[str]:
         p = self.p
         out: list[str] = []
         if not contacts:
@@ -77,18 +147,19 @@ class ActionDetector:
         if self._onset_ns is None:
             self._onset_ns = t_ns
             dt = (t_ns - self._last_rest_ns) / 1e9 if self._last_rest_ns is not None else None
-            fast = dt is not None and dt > 0 and main.peak / dt > p.collision_speed_mm_s
+            self._speed = main.peak / dt if dt is not None and dt > 0 else 0.0
+            fast = self._speed > p.collision_speed_mm_s
             out.append("collision" if fast else "touch")
             self._anchor = self._prev_loc = main.location
             self._still_since = t_ns
         else:
             dt = max((t_ns - (self._prev_ns or t_ns)) / 1e9, 1e-9)
-            speed = _norm(main.location - self._prev_loc) / dt
+            speed = self._speed = _norm(main.location - self._prev_loc) / dt
             if speed > p.rest_speed_mm_s:
                 self._still_since = None
             elif self._still_since is None:
                 self._still_since = t_ns
-            moved = _norm(main.location - self._anchor)
+            moved = self._moved = _norm(main.location - self._anchor)
             sheared = _norm(main.shear) > p.slip_shear_ratio * max(main.depth, 1e-9)
             if not self._slipping and (moved > p.slip_mm or sheared):
                 out.append("slip")
@@ -111,13 +182,28 @@ class ActionDetector:
         return out
 
     def _update_pinch(self, contacts: list[Contact], out: list[str]) -> None:
-        if len(contacts) < 2:
-            self._pinch_d0 = None
+        p = self.p
+        if len(contacts) < 2 or contacts[1].peak < p.pinch_peak_ratio * contacts[0].peak:
+            self._pinch_d0 = self._pinch_start = self._pinch_prev = None
             return
-        d = _norm(contacts[0].location - contacts[1].location)
-        if self._pinch_d0 is None:
-            self._pinch_d0 = d
-        elif not self._pinched and self._pinch_d0 - d > self.p.pinch_mm:
+        a, b = contacts[0].location, contacts[1].location
+        prev = self._pinch_prev
+        if prev is not None:
+            if _norm(a - prev[1]) + _norm(b - prev[0]) < _norm(a - prev[0]) + _norm(b - prev[1]):
+                a, b = b, a  # the same two fingers, listed the other way round
+            if max(_norm(a - prev[0]), _norm(b - prev[1])) > p.pinch_jump_mm:
+                prev = None  # another contact took a finger's place: a new pair
+        self._pinch_prev = (a, b)
+        d = _norm(a - b)
+        if prev is None or self._pinch_d0 is None or self._pinch_start is None:
+            self._pinch_d0, self._pinch_start = d, (a, b)
+            return
+        if self._pinched or self._pinch_d0 - d <= p.pinch_mm:
+            return
+        a0, b0 = self._pinch_start
+        u = (b0 - a0) / max(self._pinch_d0, 1e-9)
+        if float((a - a0) @ u) >= p.pinch_mm / 4 and float((b0 - b) @ u) >= p.pinch_mm / 4:
+            self._approach = self._pinch_d0 - d
             out.append("pinch")
             self._pinched = True
 
@@ -125,4 +211,5 @@ class ActionDetector:
         self._onset_ns = None
         self._anchor = self._prev_loc = self._still_since = None
         self._slipping = self._pressed = self._pinched = False
-        self._pinch_d0 = None
+        self._pinch_d0 = self._pinch_start = self._pinch_prev = None
+        self._moved = self._approach = 0.0

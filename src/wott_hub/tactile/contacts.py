@@ -53,7 +53,8 @@ class WinklerForceModel:
         self.node_stiffness = modulus_mpa * mesh.node_areas / thickness_mm  # N/mm
 
     def force(self, nodes: np.ndarray, displacement: np.ndarray) -> np.ndarray:
-        return self.node_stiffness[nodes] @ displacement[nodes]
+        force: np.ndarray = self.node_stiffness[nodes] @ displacement[nodes]
+        return force
 
 
 def group_patches(mesh: SkinMesh, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -161,7 +161,8 @@ class SkinMesh:
         a = 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
         if self.cells.shape[1] == 4:
             a = a[: self.n_cells] + a[self.n_cells :]
-        return a
+        areas: np.ndarray = a
+        return areas
 
     @cached_property
     def node_areas(self) -> np.ndarray:
@@ -302,7 +303,7 @@ def barrel(
     return SkinMesh(nodes, orient_outward(nodes, cells), free, name)
 
 
-def cylinder(radius_mm: float, height_mm: float, **kwargs) -> SkinMesh:
+def cylinder(radius_mm: float, height_mm: float, **kwargs: Any) -> SkinMesh:
     """A straight cylinder: a barrel whose middle radius equals its base radius."""
     kwargs.setdefault("name", "cylinder")
     return barrel(radius_mm, radius_mm, height_mm, **kwargs)

@@ -2,25 +2,36 @@
 
 The processor keeps the little state a frame sequence needs (which nodes were
 deformed, the action state machine) and does no work a frame does not need: a
-frame with no node above ε costs one norm over the free nodes.
+frame with no node above ε costs one norm over the free nodes (and one max over
+those norms, for the note below).
+
+A press too light to report (issue 14: a Kelvin-Voigt 4 N press on Dragon Skin
+30 peaks below ε) must not be silent: while the largest node norm stays in
+[``below_threshold_floor`` x ε, ε] for ``below_threshold_s`` of frame time,
+``below_note`` says so (the hub appends it to the device's health reason). The
+floor keeps rest noise out: 0.25 by default; a driver whose rest readings are
+noisier declares its own (``below_threshold_floor``, the camera skins: 0.75),
+and the hub passes it here (``set_below_threshold``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .actions import ActionDetector, ActionParams
-from .contacts import Contact, WinklerForceModel, find_contacts
+from .actions import ActionDetector, ActionEvidence, ActionParams
+from .contacts import Contact, ForceModel, WinklerForceModel, find_contacts
 from .frame import FrameError, TactileFrame
 from .mesh import SkinMesh
 
 if TYPE_CHECKING:
     from .device import DeviceDescription
 
-__all__ = ["FrameProcessor", "FrameResult", "ProcessingParams", "processing_params"]
+__all__ = ["BELOW_THRESHOLD_FLOOR", "FrameProcessor", "FrameResult", "ProcessingParams", "processing_params"]
+
+BELOW_THRESHOLD_FLOOR = 0.25  # x epsilon: the floor of a noise-free skin (scene, taxel)
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,6 +47,8 @@ class ProcessingParams:
     # "winkler": independent springs under each node (cheap); "stiffness": the Kelvin-Voigt skin's
     # assembled stiffness (wott_hub.tactile.mechanics), exact for quasi-static presses
     force_model: str = "winkler"
+    below_threshold_s: float = 1.0  # a press this long in [floor x ε, ε] gets a health note; 0: never
+    below_threshold_floor: float = BELOW_THRESHOLD_FLOOR  # x epsilon
 
 
 def processing_params(desc: DeviceDescription) -> ProcessingParams:
@@ -55,8 +68,13 @@ class FrameResult:
     contacts: list[Contact]
     actions: list[str]
     packet_due: bool
+    details: tuple[ActionEvidence, ...] = ()  # one per action, same order
 
-    def skin_deformed_detection(self) -> dict | None:
+    def action_details(self) -> list[dict[str, Any]]:
+        """The ``actionDetails`` event payloads of this frame's actions (built only when asked)."""
+        return [e.payload() for e in self.details]
+
+    def skin_deformed_detection(self) -> dict[str, Any] | None:
         """The ``skinDeformedDetection`` event payload, or None if nothing to send.
 
         A packet lists every node currently above ε (clients treat absent nodes
@@ -74,7 +92,7 @@ class FrameResult:
             ],
         }
 
-    def contact_information(self) -> dict:
+    def contact_information(self) -> dict[str, Any]:
         """The ``contactInformation`` property value for this frame."""
         return {
             "numOfContacts": len(self.contacts),
@@ -96,6 +114,7 @@ class FrameProcessor:
         if not p.epsilon_mm > 0:
             raise ValueError(f"epsilon must be positive, got {p.epsilon_mm}")
         self._free = mesh.free_indices
+        self._force: ForceModel
         if p.force_model == "winkler":
             self._force = WinklerForceModel(mesh, p.modulus_mpa, p.thickness_mm)
         elif p.force_model == "stiffness":
@@ -107,6 +126,17 @@ class FrameProcessor:
         self._actions = ActionDetector(p.actions)
         self._prev_deformed = np.empty(0, dtype=np.int64)
         self._last_t: int | None = None
+        self.below_note = ""  # see the module doc; "" while nothing is pressed below ε for long
+        self._below_since: int | None = None
+        self.set_below_threshold(p.below_threshold_floor, p.below_threshold_s)
+
+    def set_below_threshold(self, floor: float, seconds: float) -> None:
+        """Floor (x ε) and duration (s, 0: never) of the below-threshold note (the driver's, if it says)."""
+        eps = self.params.epsilon_mm
+        self._below_lo, self._below_ns = floor * eps, int(seconds * 1e9)
+        self._below_text = (f"below threshold: displaced {floor * eps:g}-{eps:g} mm (epsilon {eps:g} mm) "
+                            f"for over {seconds:g} s: not reported")
+        self.below_note, self._below_since = "", None
 
     def process(self, frame: TactileFrame) -> FrameResult:
         if frame.n_nodes != self.mesh.n_nodes:
@@ -121,6 +151,8 @@ class FrameProcessor:
         above = norm_free > eps
         deformed = self._free[above]
         if deformed.size:
+            if not np.isfinite(norm_free[above]).all():  # finite but huge displacements overflow ‖D‖
+                raise FrameError("displacement too large: its norm overflows (check the driver's scale)")
             intensity_full = np.zeros(self.mesh.n_nodes)
             intensity_full[self._free] = norm_free
             contacts = find_contacts(
@@ -128,11 +160,21 @@ class FrameProcessor:
             )
             intensity = np.round(norm_free[above], self.params.intensity_decimals)
             is_release, due = False, True
+            self._below_since, self.below_note = None, ""
         else:
             contacts = []
+            if self._below_ns:  # one max over the norms already computed; NaN compares false
+                if norm_free.max(initial=0.0) > self._below_lo:
+                    if self._below_since is None:
+                        self._below_since = frame.t_ns
+                    elif frame.t_ns - self._below_since >= self._below_ns:
+                        self.below_note = self._below_text
+                else:
+                    self._below_since, self.below_note = None, ""
             is_release = due = bool(self._prev_deformed.size)
             deformed = self._prev_deformed if is_release else deformed
             intensity = np.zeros(len(deformed))
         self._prev_deformed = self._free[above]
         actions = self._actions.update(frame.t_ns, contacts)
-        return FrameResult(frame.t_ns, deformed, intensity, is_release, contacts, actions, due)
+        details = tuple(self._actions.details) if actions else ()
+        return FrameResult(frame.t_ns, deformed, intensity, is_release, contacts, actions, due, details)

@@ -10,6 +10,7 @@ from typing import Any
 
 from wott_hub.tactile.device import DeviceDescription
 
+from .actions import declared_actions
 from .forms import FormFactory, FormLayout
 from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
 
@@ -20,7 +21,8 @@ __all__ = ["build_tactile_td", "static_property_values", "tactile_context"]
 def tactile_context() -> dict[str, Any]:
     """The Tactile vocabulary's JSON-LD context document (served by the hub)."""
     text = resources.files("wott_hub.td").joinpath("context/tactile-v1.jsonld").read_text()
-    return json.loads(text)
+    context: dict[str, Any] = json.loads(text)
+    return context
 
 
 def build_tactile_td(
@@ -29,8 +31,12 @@ def build_tactile_td(
     base: str = "http://127.0.0.1:8080/",
     forms: FormFactory | None = None,
     context_url: str | None = None,
+    actions: tuple[str, ...] = ("tare", "restart"),
 ) -> dict[str, Any]:
     """The device's TD 1.1 document with the Tactile vocabulary.
+
+    ``actions``: the device actions it declares (``wott_hub.td.actions``; the hub
+    names those its driver can do); the ``deviceAction`` event recording them is in ``EVENTS``.
 
     Forms follow the hub's layout at ``base`` (``wott_hub.td.forms``) unless a
     binding supplies its own ``forms``. ``context_url`` is where the Tactile
@@ -53,6 +59,9 @@ def build_tactile_td(
         aff["title"] = name
         aff["forms"] = forms("event", name, aff)
         events[name] = aff
+    declared = declared_actions(actions)
+    for name, aff in declared.items():
+        aff["forms"] = forms("action", name, aff)
     td: dict[str, Any] = {
         "@context": ctx,
         "@type": ["tac:TactileSensor"],
@@ -67,6 +76,8 @@ def build_tactile_td(
         "properties": properties,
         "events": events,
     }
+    if declared:
+        td["actions"] = declared
     return td
 
 
@@ -78,7 +89,7 @@ def static_property_values(desc: DeviceDescription) -> dict[str, Any]:
     """
     mesh, s, m, f = desc.mesh, desc.shape, desc.material, desc.frame
 
-    def pt(v) -> dict[str, float]:
+    def pt(v: tuple[float, float, float]) -> dict[str, float]:
         return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
 
     shape: dict[str, Any] = {"shapeType": s.shape_type}
@@ -114,4 +125,5 @@ def static_property_values(desc: DeviceDescription) -> dict[str, Any]:
             "axisOrientation": {"xAxis": pt(f.x_axis), "yAxis": pt(f.y_axis), "zAxis": pt(f.z_axis)},
         },
         "contactInformation": {"numOfContacts": 0, "contactLocations": [], "contactForces": []},
+        "unavailableNodes": {"numOfUnavailableNodes": 0, "arrayOfUnavailableNodes": []},  # served live
     }

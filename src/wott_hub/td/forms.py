@@ -7,13 +7,18 @@ One HTTP port serves, under ``/wot``:
 - ``GET /wot/<id>/properties``: all property values; ``.../properties/<name>``: one
 - ``GET /wot/<id>/properties/<name>/observe``: SSE stream of an observable property
 - ``GET /wot/<id>/events/<name>``: SSE stream of one event; ``.../events``: of all events
+- ``POST /wot/<id>/actions/<name>``: invoke an action (JSON input and output)
 - ``GET /contexts/tactile-v1.jsonld``: the Tactile JSON-LD context
 
 ``/things`` is left to the TD directory (the W3C Discovery API owns that path).
 The WebSocket port serves wotpy's JSON-RPC at ``ws://host:port/<id>``.
 
 Every form states ``op`` and ``contentType``; HTTP forms state ``htv:methodName``
-and SSE forms ``subprotocol: "sse"`` (node-wot picks forms by these). Hrefs are
+and SSE forms ``subprotocol: "sse"`` (node-wot picks forms by these). An SSE
+form's ``contentType`` is that of each message's data, ``application/json``:
+node-wot decodes notifications by it (``text/event-stream`` is the transport,
+which ``subprotocol`` already says). Its ``op`` lists the matching unsubscribe
+operation, closing the stream, so that node-wot stops over the same form. Hrefs are
 absolute because wotpy's HTTP client fetches ``form.href`` without resolving it
 against ``base``. HTTP forms come first: wotpy reads properties over HTTP and
 takes the first HTTP form.
@@ -31,15 +36,16 @@ from urllib.parse import quote
 
 from slugify import slugify
 
+from .mqtt import MqttLayout
+
 __all__ = ["CONTEXT_PATH", "PREFIX", "FormFactory", "FormLayout"]
 
 CONTEXT_PATH = "contexts/tactile-v1.jsonld"
 
 FormFactory = Callable[[str, str, dict[str, Any]], list[dict[str, Any]]]
-"""(kind 'property'|'event', affordance name, affordance) -> forms."""
+"""(kind 'property'|'event'|'action', affordance name, affordance) -> forms."""
 
 PREFIX = "/wot"
-SSE = "text/event-stream"
 JSON = "application/json"
 
 
@@ -49,6 +55,7 @@ class FormLayout:
 
     http_base: str
     ws_base: str | None = None
+    mqtt: MqttLayout | None = None  # [mqtt]: every event and observable property on the broker too
 
     @property
     def context_url(self) -> str:
@@ -64,23 +71,34 @@ class FormLayout:
     def factory(self, thing: str) -> FormFactory:
         base = self.thing_url(thing)
         ws = self.ws_url(thing)
+        mqtt = self.mqtt
 
         def forms(kind: str, name: str, affordance: dict[str, Any]) -> list[dict[str, Any]]:
+            out = _forms(kind, name, affordance)
+            if mqtt is not None:  # after HTTP and WebSocket: clients that know only those are unchanged
+                out += mqtt.forms(thing, kind, name, affordance)
+            return out
+
+        def _forms(kind: str, name: str, affordance: dict[str, Any]) -> list[dict[str, Any]]:
             if kind == "property":
                 href = f"{base}/properties/{quote(name, safe='')}"
                 out = [{"href": href, "op": ["readproperty"], "htv:methodName": "GET",
                         "contentType": JSON}]
                 if affordance.get("observable"):
-                    out.append({"href": f"{href}/observe", "op": ["observeproperty"],
-                                "htv:methodName": "GET", "subprotocol": "sse", "contentType": SSE})
+                    out.append({"href": f"{href}/observe", "op": ["observeproperty", "unobserveproperty"],
+                                "htv:methodName": "GET", "subprotocol": "sse", "contentType": JSON})
                 if ws:
                     ops = ["readproperty"]
                     if affordance.get("observable"):
                         ops += ["observeproperty", "unobserveproperty"]
                     out.append({"href": ws, "op": ops, "contentType": JSON})
                 return out
-            out = [{"href": f"{base}/events/{quote(name, safe='')}", "op": ["subscribeevent"],
-                    "htv:methodName": "GET", "subprotocol": "sse", "contentType": SSE}]
+            if kind == "action":  # invoked over HTTP only (wott_hub.hub.device_actions serves it)
+                return [{"href": f"{base}/actions/{quote(name, safe='')}", "op": ["invokeaction"],
+                         "htv:methodName": "POST", "contentType": JSON}]
+            out = [{"href": f"{base}/events/{quote(name, safe='')}",
+                    "op": ["subscribeevent", "unsubscribeevent"],
+                    "htv:methodName": "GET", "subprotocol": "sse", "contentType": JSON}]
             if ws:
                 out.append({"href": ws, "op": ["subscribeevent", "unsubscribeevent"], "contentType": JSON})
             return out
@@ -92,6 +110,6 @@ class FormLayout:
         return [
             {"href": f"{base}/properties", "op": ["readallproperties"], "htv:methodName": "GET",
              "contentType": JSON},
-            {"href": f"{base}/events", "op": ["subscribeallevents"], "htv:methodName": "GET",
-             "subprotocol": "sse", "contentType": SSE},
+            {"href": f"{base}/events", "op": ["subscribeallevents", "unsubscribeallevents"],
+             "htv:methodName": "GET", "subprotocol": "sse", "contentType": JSON},
         ]

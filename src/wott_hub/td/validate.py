@@ -13,7 +13,7 @@ from typing import Any
 import jsonschema
 from wott_directory.validation import load_data, schema_problems
 
-from .vocabulary import EVENTS, PROPERTIES, TD_CONTEXT
+from .vocabulary import DETAIL_EVENTS, DETAIL_PROPERTIES, EVENTS, PROPERTIES, TD_CONTEXT
 
 __all__ = ["Problem", "validate_payload", "validate_td"]
 
@@ -82,8 +82,9 @@ def tactile_validator() -> jsonschema.protocols.Validator:
         "type": "object",
         "properties": {
             "properties": {"type": "object", "properties": prop_schemas,
-                           "required": list(PROPERTIES)},
-            "events": {"type": "object", "properties": event_schemas, "required": list(EVENTS)},
+                           "required": [p for p in PROPERTIES if p not in DETAIL_PROPERTIES]},
+            "events": {"type": "object", "properties": event_schemas,
+                       "required": [e for e in EVENTS if e not in DETAIL_EVENTS]},
         },
         "required": ["properties", "events"],
     }
@@ -115,6 +116,7 @@ def _interop_problems(td: dict[str, Any]) -> list[Problem]:
         for name, aff in affordances.items():
             base = f"$.{kind}.{name}"
             _find_empty_keywords(aff, base, out)
+            _find_untyped(aff, kind, base, out)
             forms = aff.get("forms") if isinstance(aff, dict) else None
             for i, form in enumerate(forms if isinstance(forms, list) else []):
                 if not isinstance(form, dict):
@@ -122,6 +124,9 @@ def _interop_problems(td: dict[str, Any]) -> list[Problem]:
                 where = f"{base}.forms[{i}]"
                 if "op" not in form:
                     out.append(Problem("interop", f"{where}.op", "every form must state its op"))
+                href = str(form.get("href", ""))
+                if "://" in href and not href.startswith(("http://", "https://", "ws://", "wss://")):
+                    continue  # another protocol's form (mqtt://, the MQTT binding's terms): not HTTP's rules
                 if str(form.get("href", "")).startswith(("http", "things/", "/")) or "base" in td:
                     if "htv:methodName" not in form and not form.get("subprotocol") == "websocket":
                         if not str(form.get("href", "")).startswith("ws"):
@@ -132,6 +137,35 @@ def _interop_problems(td: dict[str, Any]) -> list[Problem]:
                     out.append(Problem("interop", f"{where}.subprotocol",
                                        "event forms over HTTP must state their subprotocol"))
     return out
+
+
+_SCHEMAS_OF = {"properties": ((),), "actions": (("input",), ("output",)), "events": (("data",),)}
+
+
+def _find_untyped(aff: Any, kind: str, path: str, out: list[Problem]) -> None:
+    """Every data schema wotpy builds (an affordance's, its object members, array items) states its
+    ``type``: wotpy 0.18 cannot consume one without (``ValueError: Unknown type: None``)."""
+    if not isinstance(aff, dict):
+        return
+    for keys in _SCHEMAS_OF[kind]:
+        node: Any = aff
+        for key in keys:
+            node = node.get(key) if isinstance(node, dict) else None
+        if node is not None:
+            _check_typed(node, ".".join([path, *keys]), out)
+
+
+def _check_typed(node: Any, path: str, out: list[Problem]) -> None:
+    if not isinstance(node, dict):
+        return
+    if "type" not in node:
+        out.append(Problem("interop", f"{path}.type", "a data schema must state its type (wotpy needs one)"))
+    members = node.get("properties")
+    for name, sub in (members.items() if isinstance(members, dict) else ()):
+        _check_typed(sub, f"{path}.properties.{name}", out)
+    items = node.get("items")
+    for i, sub in enumerate(items if isinstance(items, list) else [items] if items is not None else []):
+        _check_typed(sub, f"{path}.items" + (f"[{i}]" if isinstance(items, list) else ""), out)
 
 
 def _find_empty_keywords(node: Any, path: str, out: list[Problem]) -> None:
@@ -162,7 +196,8 @@ def affordance_schema(td: dict[str, Any], kind: str, name: str) -> dict[str, Any
     """The JSON Schema a TD declares for a property value or an event's data."""
     aff = td[{"property": "properties", "event": "events"}[kind]][name]
     ds = aff.get("data", {}) if kind == "event" else aff
-    return _strip_td_keywords(ds)
+    schema: dict[str, Any] = _strip_td_keywords(ds)
+    return schema
 
 
 def _strip_td_keywords(ds: Any) -> Any:

@@ -14,7 +14,9 @@ from typing import Any
 
 from wott_hub.tactile.actions import ACTIONS
 
-__all__ = ["EVENTS", "PROPERTIES", "TACTILE_NS", "TD_CONTEXT", "xyz"]
+from .actions import DEVICE_ACTION_EVENT
+
+__all__ = ["DETAIL_EVENTS", "DETAIL_PROPERTIES", "EVENTS", "PROPERTIES", "TACTILE_NS", "TD_CONTEXT", "xyz"]
 
 TACTILE_NS = "https://w3id.org/wott/tactile#"
 TD_CONTEXT = ["https://www.w3.org/2019/wot/td/v1", "https://www.w3.org/2022/wot/td/v1.1"]
@@ -144,6 +146,27 @@ PROPERTIES: dict[str, dict[str, Any]] = {
         "required": ["originLocation", "axisOrientation"],
     },
 }
+
+# Properties beyond the paper's (issue 14), declared in every TD (part of PROPERTIES) but not required of
+# one (a TD from an older hub stays valid). A vision skin's markers missing, merged or occluded at rest:
+# their nodes' value is unknown (read 0, never reported deformed); other families always serve it empty.
+DETAIL_PROPERTIES: dict[str, dict[str, Any]] = {
+    "unavailableNodes": {
+        "@type": "tac:UnavailableNodes",
+        "description": ("Nodes whose value is unknown (a vision skin's markers missing, merged or occluded "
+                        "at rest): never reported in skinDeformedDetection, which is not the same as at "
+                        "rest. Empty on a skin that can always read every node."),
+        "observable": True,
+        "type": "object",
+        "properties": {
+            "numOfUnavailableNodes": {"type": "integer", "minimum": 0},
+            "arrayOfUnavailableNodes": {"type": "array", "items": {"type": "integer", "minimum": 0},
+                                        "description": "nodeID of each, ascending"},
+        },
+        "required": ["numOfUnavailableNodes", "arrayOfUnavailableNodes"],
+    },
+}
+PROPERTIES.update(DETAIL_PROPERTIES)
 for _p in PROPERTIES.values():
     _p["readOnly"] = True
 
@@ -180,3 +203,36 @@ EVENTS: dict[str, dict[str, Any]] = {
         },
     },
 }
+
+
+# Events beyond the paper's two (issue 14), declared in every TD (part of EVENTS) but not required of one
+# (a TD from an older hub without them stays valid): the evidence behind each action.
+DETAIL_EVENTS: dict[str, dict[str, Any]] = {
+    "actionDetails": {
+        "@type": "tac:ActionDetails",
+        "description": ("Sibling of actionDetection, one per action in the same order: the action, a "
+                        "confidence in [0.5, 1] (0.5: its deciding quantity just crossed the threshold) "
+                        "and the evidence it was taken on."),
+        "data": {
+            "type": "object",
+            "properties": {
+                "action": {"type": "string", "enum": list(ACTIONS)},
+                "confidence": {"type": "number", "minimum": 0, "maximum": 1},
+                "evidence": {
+                    "type": "object",
+                    "properties": {
+                        "contacts": {"type": "integer", "minimum": 0},
+                        "durationS": {"type": "number", "minimum": 0, "unit": "s"},
+                        "speedMmPerS": {"type": "number", "minimum": 0, "unit": "mm/s"},
+                        "moveMm": {"type": "number", "minimum": 0, "unit": "mm"},
+                        "approachMm": {"type": "number", "unit": "mm"},
+                    },
+                    "required": ["contacts", "durationS", "speedMmPerS"],
+                },
+            },
+            "required": ["action", "confidence", "evidence"],
+        },
+    },
+}
+DETAIL_EVENTS.update(DEVICE_ACTION_EVENT)  # each device action invoked (tare, restart...: td/actions.py)
+EVENTS.update(DETAIL_EVENTS)  # declared with the paper's events; validate.py does not require them

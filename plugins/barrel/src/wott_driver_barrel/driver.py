@@ -15,12 +15,17 @@ the device opens (``settings.open_barrel``).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from wott_vision.driver import CameraDriver, SourceLost
 
-from wott_hub.drivers.base import Health
+from wott_hub.plugin_api import Health
 
 from .estimator import BarrelEstimate, BarrelEstimator, ReferenceNotFound
+
+if TYPE_CHECKING:
+    from wott_vision.camera import CameraReader
 
 __all__ = ["BarrelDriver", "CameraPair", "SourceLost"]
 
@@ -28,16 +33,17 @@ __all__ = ["BarrelDriver", "CameraPair", "SourceLost"]
 class CameraPair:
     """Two camera sources read together: ``read()`` -> (True, (bottom, top)) or (False, None)."""
 
-    def __init__(self, specs: tuple[int | str, ...], names: tuple[str, ...] = ("bottom", "top")) -> None:
+    def __init__(self, specs: tuple[int | str, ...], names: tuple[str, ...] = ("bottom", "top"), *,
+                 fps: float | None = None, realtime: bool = True) -> None:
         from wott_vision.camera import CameraError, open_source
 
         self.names = names
         self.failure = ""
-        self._cams: list = []
+        self._cams: list[CameraReader] = []
         try:
             for spec, name in zip(specs, names, strict=True):
                 try:
-                    self._cams.append(open_source(spec))
+                    self._cams.append(open_source(spec, fps=fps, realtime=realtime))
                 except CameraError as e:
                     raise CameraError(f"{name} camera: {e}") from None
         except BaseException:
@@ -47,12 +53,21 @@ class CameraPair:
     def read(self) -> tuple[bool, tuple[np.ndarray, ...] | None]:
         frames = []
         for cam, name in zip(self._cams, self.names, strict=True):
-            ok, frame = cam.read()
-            if not ok:
+            _, frame = cam.read()
+            if frame is None:  # a camera that failed gives (False, None), one that read (True, frame)
                 self.failure = f"{name} camera: {cam.failure}"
                 return False, None
             frames.append(frame)
         return True, tuple(frames)
+
+    @property
+    def recorded(self) -> bool:
+        """Both recorded (files): frames carry the bottom camera's recorded time ``t_s``."""
+        return bool(self._cams) and all(c.recorded for c in self._cams)
+
+    @property
+    def t_s(self) -> float | None:
+        return self._cams[0].t_s if self._cams else None
 
     def release(self) -> None:
         for cam in self._cams:
@@ -78,5 +93,8 @@ class BarrelDriver(CameraDriver):
             self.set_health(Health.degraded, "the model returned NaN/Inf: frame dropped")
             return None
         total = est.layout.markers.n_markers * len(est.layout.cameras)
-        self._report_lost(result.lost if est.uses_markers else 0, total, "marker views")
+        self._report_health(result.displacement, self._frame_t_ns,
+                            lost=result.lost if est.uses_markers else 0, total=total, what="marker views",
+                            unavailable=est.unavailable_nodes, n_markers=total, clamped=result.clamped,
+                            unavailable_markers=est.unavailable_markers)
         return result.displacement

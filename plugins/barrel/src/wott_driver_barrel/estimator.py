@@ -19,21 +19,35 @@ The reference is where each marker sits at rest, in the model's marker order:
 and calibrated to it); ``"first-frame"`` detects it in the first frame (skin
 at rest) and orders the dots by ray and radius to match the model's order,
 for a real sensor whose cameras sit slightly differently.
+
+Either way the first frame read (skin at rest) says which markers are there:
+with ``"model"`` its detections are matched to the model's rest positions
+(``wott_vision.reference.match_expected``) before the first estimate, so a
+marker painted out, merged with a neighbour or hidden is *unavailable* from
+the start (its nodes read 0, listed in ``unavailable_nodes``), not a marker
+the tracker loses on every frame.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .geometry import BarrelLayout
+from .geometry import BarrelLayout, FisheyeCamera
 from .model import DisplacementModel
 
-__all__ = ["BarrelEstimate", "BarrelEstimator", "ReferenceNotFound", "annulus_mask", "order_like"]
+if TYPE_CHECKING:  # imported where used: the tracker loads SciPy
+    from wott_vision.markers import MarkerDetector
+    from wott_vision.tracking import MarkerTracker
+
+__all__ = ["MAX_DISPLACEMENT_MM", "BarrelEstimate", "BarrelEstimator", "ReferenceNotFound", "annulus_mask",
+           "clamp_norm", "order_like"]
 
 REFERENCES = ("model", "first-frame")
+MIN_AVAILABLE = 0.5  # of a camera's markers matched at rest, below which the frame is not a rest frame
+MAX_DISPLACEMENT_MM = 25.0  # physical bound: half the rim's radius (36 mm); beyond, the model extrapolates
 
 
 class ReferenceNotFound(RuntimeError):
@@ -45,6 +59,7 @@ class BarrelEstimate:
     displacement: np.ndarray  # (N, 3) mm
     lost: int  # markers not detected this frame, both cameras together
     tracked_px: tuple[np.ndarray, ...] = ()  # per camera (M, 2), NaN where lost
+    clamped: int = 0  # nodes displaced beyond MAX_DISPLACEMENT_MM, clamped to it
 
 
 @dataclass
@@ -60,9 +75,12 @@ class BarrelEstimator:
         if self.reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
         self.reference_px: tuple[np.ndarray, ...] | None = None
-        self._detectors: list = []
-        self._trackers: list = []
+        self._detectors: list[MarkerDetector] = []
+        self._trackers: list[MarkerTracker] = []
         self._stereo = self.layout.stereo_maps() if len(self.layout.cameras) == 2 else None
+        self.available: tuple[np.ndarray, ...] | None = None  # per camera (M,) bool; None: all seen
+        self._unknown = np.zeros(self.layout.mesh.n_nodes, dtype=bool)
+        self._checked = self.reference != "model"  # "model": the first frame says which markers are there
         if self.reference == "model" and self.uses_markers:
             self._set_reference(self.layout.reference_px)
 
@@ -72,7 +90,7 @@ class BarrelEstimator:
 
     @property
     def has_reference(self) -> bool:
-        return self.reference_px is not None or not self.uses_markers
+        return (self.reference_px is not None and self._checked) or not self.uses_markers
 
     def _set_reference(self, ref: tuple[np.ndarray, ...]) -> None:
         from wott_vision.markers import MarkerDetector
@@ -97,28 +115,88 @@ class BarrelEstimator:
         self._trackers = [MarkerTracker(r, **self.tracker) for r in self.reference_px]
 
     def set_reference(self, images: tuple[np.ndarray, ...]) -> None:
-        """Take these frames (skin at rest) as the reference ("first-frame" mode)."""
+        """Take these frames (skin at rest) as the reference ("first-frame" mode, or a tare).
+
+        With ``"model"``, the first call only checks the frames against the
+        model's rest markers: the reference stays the model's, less the markers
+        not there.
+        """
         from wott_vision.markers import MarkerDetector
+        from wott_vision.reference import match_expected
 
         opts = {k: v for k, v in self.detector.items() if k != "mask"}
-        ordered = []
+        if not self._checked:
+            self._check_model_reference(images, MarkerDetector(**opts))
+            return
+        ordered, available = [], []
         for c, (img, model_ref) in enumerate(zip(images, self.layout.reference_px, strict=True)):
             pts = MarkerDetector(**opts)(img)
             try:
                 ordered.append(order_like(pts, model_ref, self.layout.markers.rays))
+                available.append(np.ones(len(model_ref), dtype=bool))
             except ReferenceNotFound as e:
-                raise ReferenceNotFound(f"camera {self.layout.cameras[c].name}: {e}") from None
+                match = match_expected(pts, model_ref)  # markers missing, merged or occluded
+                if match.available.mean() < MIN_AVAILABLE:
+                    raise ReferenceNotFound(f"camera {self.layout.cameras[c].name}: {e}") from None
+                ordered.append(match.px)
+                available.append(match.available)
+        self._set_available(None if all(a.all() for a in available) else tuple(available))
         self._set_reference(tuple(ordered))
+
+    def _check_model_reference(self, images: tuple[np.ndarray, ...], detect: MarkerDetector) -> None:
+        """Which of the model's rest markers the frames show (see module doc)."""
+        from wott_vision.reference import match_expected
+
+        available = []
+        for c, (img, model_ref) in enumerate(zip(images, self.layout.reference_px, strict=True)):
+            match = match_expected(detect(img), model_ref)
+            if match.available.mean() < MIN_AVAILABLE:
+                raise ReferenceNotFound(f"camera {self.layout.cameras[c].name}: {int(match.available.sum())} "
+                                        f"of {len(model_ref)} markers where the camera model puts them")
+            available.append(match.available)
+        self._set_available(None if all(a.all() for a in available) else tuple(available))
+        self._checked = True
+        self.reset_tracking()
+
+    def _set_available(self, available: tuple[np.ndarray, ...] | None) -> None:
+        """Markers seen at rest per camera; a node is unknown when its nearest marker is seen by none."""
+        self.available = available
+        self._unknown = np.zeros(self.layout.mesh.n_nodes, dtype=bool)
+        if available is None:
+            return
+        nowhere = ~np.logical_or.reduce(available)
+        mesh = self.layout.mesh
+        d = np.linalg.norm(mesh.nodes[:, None, :] - self.layout.markers.rest[None, :, :], axis=2)
+        self._unknown = nowhere[d.argmin(axis=1)] & mesh.free
+
+    @property
+    def unavailable_markers(self) -> int:
+        """Marker views (both cameras) not seen at rest."""
+        return 0 if self.available is None else int(sum((~a).sum() for a in self.available))
+
+    @property
+    def unavailable_nodes(self) -> list[int]:
+        """Nodes whose value is unknown (read 0): their nearest marker unavailable in every camera."""
+        return np.flatnonzero(self._unknown).tolist()
 
     def features(self, images: tuple[np.ndarray, ...]) -> tuple[np.ndarray, int, tuple[np.ndarray, ...]]:
         """(model input (F,), markers lost, tracked positions per camera)."""
         if self.reference_px is None:
             raise ReferenceNotFound("no reference yet")
         motion, seen, lost, tracked = [], [], 0, []
-        for img, det, trk, ref in zip(images, self._detectors, self._trackers, self.reference_px,
-                                      strict=True):
+        cams = zip(images, self._detectors, self._trackers, self.reference_px, strict=True)
+        for c, (img, det, trk, ref) in enumerate(cams):
             px = trk.track(det(img), det.areas)
             ok = np.isfinite(px[:, 0])
+            if self.available is not None:  # never seen at rest: no motion known, not lost either
+                gone = ~self.available[c]
+                px[gone] = np.nan
+                lost += int((~ok & ~gone).sum())
+                ok &= ~gone
+                motion.append(np.where(ok[:, None], px, ref) - ref)
+                seen.append(ok)
+                tracked.append(px)
+                continue
             lost += int((~ok).sum())
             motion.append(np.where(ok[:, None], px, trk.estimate) - ref)
             seen.append(ok)
@@ -142,10 +220,23 @@ class BarrelEstimator:
         if not self.uses_markers:
             return BarrelEstimate(self.model.predict_images(images), 0)
         feats, lost, tracked = self.features(images)
-        return BarrelEstimate(self.model.predict_markers(feats), lost, tracked)
+        d = self.model.predict_markers(feats)
+        if self.available is not None:
+            d[self._unknown] = 0.0  # unknown, not deformed: the health lists these nodes
+        return BarrelEstimate(d, lost, tracked, clamp_norm(d, MAX_DISPLACEMENT_MM))
 
 
-def annulus_mask(ref: np.ndarray, cam, margin_px: float = 18.0,
+def clamp_norm(d: np.ndarray, bound_mm: float) -> int:
+    """Scale the rows of ``d`` (N, 3) longer than ``bound_mm`` back to it, in place; how many were."""
+    n2 = np.einsum("ij,ij->i", d, d)
+    over = n2 > bound_mm**2
+    if not over.any():
+        return 0
+    d[over] *= (bound_mm / np.sqrt(n2[over]))[:, None]
+    return int(over.sum())
+
+
+def annulus_mask(ref: np.ndarray, cam: FisheyeCamera, margin_px: float = 18.0,
                  centre: np.ndarray | None = None) -> np.ndarray:
     """(H, W) mask of the ring of the image where the markers ``ref`` (M, 2) can appear."""
     c = np.array([cam.cx, cam.cy]) if centre is None else np.asarray(centre, dtype=np.float64)
@@ -153,7 +244,8 @@ def annulus_mask(ref: np.ndarray, cam, margin_px: float = 18.0,
     yy, xx = np.mgrid[: cam.height, : cam.width]
     r2 = (xx - c[0]) ** 2 + (yy - c[1]) ** 2
     lo = max(r.min() - margin_px, 0.0)
-    return (r2 <= (r.max() + margin_px) ** 2) & (r2 >= lo**2)
+    mask: np.ndarray = (r2 <= (r.max() + margin_px) ** 2) & (r2 >= lo**2)
+    return mask
 
 
 def _polar_keys(points: np.ndarray, rays: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

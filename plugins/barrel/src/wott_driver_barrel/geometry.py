@@ -24,7 +24,7 @@ from functools import cached_property
 
 import numpy as np
 
-from wott_hub.tactile import SkinMesh
+from wott_hub.plugin_api import SkinMesh
 
 __all__ = ["BarrelLayout", "FisheyeCamera", "MarkerLayout", "default_cameras"]
 
@@ -84,12 +84,14 @@ class MarkerLayout:
     @property
     def rest(self) -> np.ndarray:
         """Marker positions (M, 3) mm at rest."""
-        return self._hits[2]
+        rest: np.ndarray = self._hits[2]
+        return rest
 
     @cached_property
     def normals(self) -> np.ndarray:
         n = np.einsum("mk,mkj->mj", self.weights, self.mesh.normals[self.triangles])
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
+        unit: np.ndarray = n / np.linalg.norm(n, axis=1, keepdims=True)
+        return unit
 
     @cached_property
     def tangents(self) -> tuple[np.ndarray, np.ndarray]:
@@ -105,12 +107,14 @@ class MarkerLayout:
 
     def marker_displacement(self, displacement: np.ndarray) -> np.ndarray:
         """Marker displacement (M, 3) from node displacement (N, 3)."""
-        return np.einsum("mk,mkj->mj", self.weights, displacement[self.triangles])
+        moved: np.ndarray = np.einsum("mk,mkj->mj", self.weights, displacement[self.triangles])
+        return moved
 
     def positions(self, displacement: np.ndarray | None = None) -> np.ndarray:
         if displacement is None:
             return self.rest
-        return self.rest + self.marker_displacement(displacement)
+        moved: np.ndarray = self.rest + self.marker_displacement(displacement)
+        return moved
 
 
 def _ray_mesh(origin: np.ndarray, direction: np.ndarray, nodes: np.ndarray,

@@ -24,14 +24,16 @@ onnxruntime is imported when a model is loaded, never at module import.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from wott_vision.markers import as_gray
 
-from wott_hub.drivers.base import DriverError
+from wott_hub.plugin_api import DriverError
 
 __all__ = ["DEFAULT_MODEL", "Contract", "DisplacementModel", "ModelError", "default_model_path"]
 
@@ -60,17 +62,23 @@ class Contract:
 
     def describe(self) -> str:
         what = "all nodes" if self.all_nodes else "free nodes"
-        if self.kind == "markers":
+        if self.image_hw is None:  # a markers contract
             return f"markers -> {what}"
         h, w = self.image_hw
         return f"images {h}x{w} ({self.image_layout}, {np.dtype(self.dtype).name}) -> {what}"
 
 
-def _fmt(arg) -> str:
+# a model's input or output as onnxruntime declares it: a NodeArg (onnxruntime ships no types)
+_NodeArg = Any
+# what a model's inputs fit: kind, input names, element type, image (H, W) and layout (None for markers)
+_Fit = tuple[str, tuple[str, ...], type, tuple[int, int] | None, str | None]
+
+
+def _fmt(arg: _NodeArg) -> str:
     return f"{arg.name!r}: {arg.type} {list(arg.shape)}"
 
 
-def _static(d) -> int | None:
+def _static(d: object) -> int | None:
     return d if isinstance(d, int) and d > 0 else None
 
 
@@ -102,6 +110,8 @@ class DisplacementModel:
                                                 providers=["CPUExecutionProvider"])
         except Exception as e:  # onnxruntime raises its own exception types for bad files
             raise ModelError(f"model {self.path}: cannot be loaded by onnxruntime: {e}") from None
+        self._hw: tuple[int, int] = (0, 0)  # an image model's frame size and input layout
+        self._layout = ""
         self.contract = self._check(expect)
         self.metadata = dict(self.session.get_modelmeta().custom_metadata_map)
         self._dry_run()
@@ -128,6 +138,8 @@ class DisplacementModel:
             raise ModelError(f"{where}: inputs {declared} fit neither contract. The driver feeds "
                              f"{self._expected()}")
         kind, inputs, dtype, hw, layout = contract
+        if hw is not None and layout is not None:  # what each frame's feeds are built to
+            self._hw, self._layout = hw, layout
         if expect != "auto" and kind != expect:
             raise ModelError(f"{where}: setting model_input = {expect!r}, but its inputs ({declared}) "
                              f"take {kind}")
@@ -137,25 +149,26 @@ class DisplacementModel:
         per_frame = [_static(d) for d in out.shape[1:]] if len(out.shape) > 1 else [_static(d)
                                                                                     for d in out.shape]
         all_nodes = False
-        if per_frame and all(d is not None for d in per_frame):
-            n = int(np.prod(per_frame))
+        sizes = [d for d in per_frame if d is not None]
+        if per_frame and len(sizes) == len(per_frame):
+            n = int(np.prod(sizes))
             if n not in (3 * self.n_free, 3 * self.n_nodes):
                 raise ModelError(self._bad_output(out.name, n, out.shape))
             all_nodes = n == 3 * self.n_nodes
         return Contract(kind, inputs, dtype, out.name, all_nodes, hw, layout)
 
-    def _bad_output(self, name: str, n: int, shape) -> str:
+    def _bad_output(self, name: str, n: int, shape: Sequence[Any]) -> str:
         return (f"model {self.path.name}: output {name!r} {list(shape)} gives {n} values per frame; "
                 f"expected {3 * self.n_free} ({self.n_free} free nodes x 3, mm, ascending node index) "
                 f"or {3 * self.n_nodes} ({self.n_nodes} nodes x 3)")
 
-    def _markers(self, ins):
+    def _markers(self, ins: Sequence[_NodeArg]) -> _Fit | None:
         if len(ins) == 1 and ins[0].type == "tensor(float)" and len(ins[0].shape) == 2:
             if _static(ins[0].shape[1]) == self.n_features:
                 return "markers", (ins[0].name,), np.float32, None, None
         return None
 
-    def _images(self, ins):
+    def _images(self, ins: Sequence[_NodeArg]) -> _Fit | None:
         c = self.n_cameras
         if len(ins) == 1 and len(ins[0].shape) == 4:
             s = [_static(d) for d in ins[0].shape]
@@ -165,8 +178,8 @@ class DisplacementModel:
                 return "images", (ins[0].name,), _DTYPES[ins[0].type], (s[1], s[2]), "nhwc"
             return None
         if len(ins) == c and len({a.type for a in ins}) == 1:
-            layouts = set()
-            sizes = set()
+            layouts: set[str] = set()
+            sizes: set[tuple[int, int]] = set()
             for a in ins:
                 s = [_static(d) for d in a.shape]
                 if len(s) == 4 and s[1] == 1 and s[2] and s[3]:
@@ -189,7 +202,7 @@ class DisplacementModel:
         if c.kind == "markers":
             feeds = {c.inputs[0]: np.zeros((1, self.n_features), np.float32)}
         else:
-            feeds = self._image_feeds(tuple(np.zeros(c.image_hw, np.uint8) for _ in range(self.n_cameras)))
+            feeds = self._image_feeds(tuple(np.zeros(self._hw, np.uint8) for _ in range(self.n_cameras)))
         try:
             out = self.session.run([c.output], feeds)[0]
         except Exception as e:
@@ -205,7 +218,7 @@ class DisplacementModel:
     # -- inference -------------------------------------------------------------
     def _image_feeds(self, images: tuple[np.ndarray, ...]) -> dict[str, np.ndarray]:
         c = self.contract
-        h, w = c.image_hw
+        h, w = self._hw
         planes = []
         for img in images:
             g = as_gray(img)
@@ -214,11 +227,11 @@ class DisplacementModel:
 
                 g = cv2.resize(g, (w, h), interpolation=cv2.INTER_AREA)
             planes.append(g.astype(np.float32) / 255.0 if c.dtype == np.float32 else g.astype(np.uint8))
-        if c.image_layout == "nchw":
+        if self._layout == "nchw":
             return {c.inputs[0]: np.stack(planes)[None]}
-        if c.image_layout == "nhwc":
+        if self._layout == "nhwc":
             return {c.inputs[0]: np.stack(planes, axis=-1)[None]}
-        shape = {"two-nchw": (1, 1, h, w), "two-nhwc": (1, h, w, 1), "two-hw": (1, h, w)}[c.image_layout]
+        shape = {"two-nchw": (1, 1, h, w), "two-nhwc": (1, h, w, 1), "two-hw": (1, h, w)}[self._layout]
         return {name: p.reshape(shape) for name, p in zip(c.inputs, planes, strict=True)}
 
     def _to_nodes(self, out: np.ndarray) -> np.ndarray:

@@ -14,10 +14,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .training import LocalRidge
+
+if TYPE_CHECKING:
+    import onnx
 
 __all__ = ["INPUT_NAME", "OUTPUT_NAME", "dense_model", "local_ridge_model", "save"]
 
@@ -27,7 +31,7 @@ OPSET = 17
 IR_VERSION = 8  # readable by onnxruntime >= 1.10
 
 
-def _finish(graph, metadata: dict[str, str]):
+def _finish(graph: onnx.GraphProto, metadata: dict[str, str]) -> onnx.ModelProto:
     from onnx import checker, helper
 
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
@@ -40,7 +44,8 @@ def _finish(graph, metadata: dict[str, str]):
     return model
 
 
-def local_ridge_model(m: LocalRidge, n_features: int, metadata: dict[str, str] | None = None):
+def local_ridge_model(m: LocalRidge, n_features: int,
+                      metadata: dict[str, str] | None = None) -> onnx.ModelProto:
     from onnx import TensorProto, helper, numpy_helper
 
     n_free, k = m.index.shape
@@ -70,7 +75,7 @@ def local_ridge_model(m: LocalRidge, n_features: int, metadata: dict[str, str] |
     return _finish(graph, meta)
 
 
-def dense_model(w: np.ndarray, b: np.ndarray, metadata: dict[str, str] | None = None):
+def dense_model(w: np.ndarray, b: np.ndarray, metadata: dict[str, str] | None = None) -> onnx.ModelProto:
     """x @ W + b: the dense ridge map (benchmark comparison)."""
     from onnx import TensorProto, helper, numpy_helper
 
@@ -87,7 +92,7 @@ def dense_model(w: np.ndarray, b: np.ndarray, metadata: dict[str, str] | None = 
     return _finish(graph, {"wott.input": "marker_px", **(metadata or {})})
 
 
-def save(model, path: str | Path) -> Path:
+def save(model: onnx.ModelProto, path: str | Path) -> Path:
     import onnx
 
     path = Path(path)

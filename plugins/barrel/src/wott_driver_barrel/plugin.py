@@ -8,9 +8,9 @@ cameras (cv2) are opened by the driver's worker thread when the device starts.
 
 from __future__ import annotations
 
-from wott_hub.plugins import DeviceConfig, FamilyInfo, hookimpl, naming_device
+from wott_hub.plugin_api import DeviceConfig, Driver, FamilyInfo, hookimpl, naming_device
 
-from .settings import FAMILY, SCHEMA, open_barrel
+from .settings import FAMILY, BarrelSettings, open_barrel
 
 __all__ = ["wott_hub_demo_devices", "wott_hub_families", "wott_hub_open_device"]
 
@@ -22,16 +22,14 @@ def wott_hub_families() -> list[FamilyInfo]:
         "Barrel vision skin (TacLink-style): two fisheye cameras inside a barrel skin with 16 x 16 "
         "markers; marker tracking and an ONNX model give the 585 free nodes' displacement "
         "(docs/barrel-vision.md).",
-        SCHEMA,
+        BarrelSettings,
     )]
 
 
 @hookimpl
-def wott_hub_open_device(config: DeviceConfig):
-    if config.family == FAMILY:
-        with naming_device(config):
-            return open_barrel(config.id, dict(config.settings))
-    return None
+def wott_hub_open_device(config: DeviceConfig) -> Driver:
+    with naming_device(config):  # the registry calls this only for FAMILY's devices
+        return open_barrel(config.id, dict(config.settings))
 
 
 @hookimpl

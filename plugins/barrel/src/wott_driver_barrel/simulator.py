@@ -1,8 +1,8 @@
 """The barrel's raw signal, simulated: both camera images of a scripted scene.
 
-Ground truth is ``Scene.displacement_at(t, mesh)`` (the indentation model
-today; the scene's own ``model`` key selects the Kelvin-Voigt skin once it
-exists), so whatever the scene's mechanics, the images and the truth agree.
+Ground truth is ``Scene.displacement_at(t, mesh)`` (the scene's own ``model``
+key selects the indentation model or the Kelvin-Voigt skin the default model is
+trained on), so whatever the scene's mechanics, the images and the truth agree.
 Each marker is drawn where the camera model projects its displaced position,
 with the apparent size its distance and slant give it (``BarrelLayout``); the
 images then go through the same detector, tracker and model as a real
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wott_hub.sim.scene import Scene
+from wott_hub.plugin_api import Scene
 
 from .geometry import BarrelLayout
 

@@ -17,6 +17,7 @@ matrix (``S * sigma^2 * I``), the closed form of training on noisy copies.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -32,13 +33,14 @@ class LocalRidge:
     index: np.ndarray  # (n_free, K) int64 feature indices (padded with 0 and zero weights)
     weight: np.ndarray  # (n_free, K, 3) float32
     bias: np.ndarray  # (3 * n_free,) float32
-    info: dict = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(np.asarray(x, dtype=np.float32))
         gathered = x[:, self.index]  # (B, n_free, K)
         y = np.einsum("bnk,nkj->bnj", gathered, self.weight).reshape(len(x), -1)
-        return y + self.bias
+        out: np.ndarray = y + self.bias
+        return out
 
     @property
     def n_parameters(self) -> int:

@@ -12,10 +12,11 @@ call ``fit_depth_model`` directly.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from wott_hub.sim.scene import Scene
+from wott_hub.plugin_api import Scene
 
 from .depth import DepthModel, fit_depth_model
 from .estimator import PadEstimator
@@ -25,11 +26,14 @@ from .simulator import PadSimulator, RenderSettings
 __all__ = ["calibrate", "calibration_samples"]
 
 
-def _press_scene(layout: PadLayout, depths: Sequence[float], radii: Sequence[float]) -> tuple[Scene, list]:
+def _press_scene(layout: PadLayout, depths: Sequence[float],
+                 radii: Sequence[float]) -> tuple[Scene, list[float]]:
     """One press per (depth, radius, place), each held for 1 s; returns the scene and the hold times."""
     span = np.array([(layout.cols - 1) * layout.pitch_mm, (layout.rows - 1) * layout.pitch_mm])
     places = [np.array(f) * span for f in ((0.5, 0.5), (0.33, 0.4), (0.62, 0.66))]
-    steps, holds, t = [], [], 0.5
+    steps: list[dict[str, Any]] = []
+    holds: list[float] = []
+    t = 0.5
     for i, depth in enumerate(depths):
         for j, radius in enumerate(radii):
             at = places[(i + j) % len(places)]
@@ -65,7 +69,7 @@ def calibration_samples(
 
 
 def calibrate(layout: PadLayout, render: RenderSettings | None = None, degree: int = 1,
-              **kwargs) -> DepthModel:
+              **kwargs: Any) -> DepthModel:
     """A depth model fitted on simulated presses of this layout and image chain.
 
     Degree 1 (a gain) by default: with the parallax solve the physical model

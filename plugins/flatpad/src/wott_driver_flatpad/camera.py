@@ -78,12 +78,14 @@ class PadOptics:
     def project(self, points: np.ndarray, axis_mm: np.ndarray) -> np.ndarray:
         """Image positions (M, 2) px of marker positions (M, 3) mm whose rest z is 0."""
         z = self.distance(points[:, 2])
-        return self.principal + self.focal_px * (points[:, :2] - axis_mm) / z[:, None]
+        px: np.ndarray = self.principal + self.focal_px * (points[:, :2] - axis_mm) / z[:, None]
+        return px
 
     def backproject(self, px: np.ndarray, dz: np.ndarray, axis_mm: np.ndarray) -> np.ndarray:
         """In-plane positions (M, 2) mm of markers seen at ``px`` with normal displacement ``dz``."""
         z = self.distance(dz)
-        return axis_mm + (px - self.principal) * (z / self.focal_px)[:, None]
+        mm: np.ndarray = axis_mm + (px - self.principal) * (z / self.focal_px)[:, None]
+        return mm
 
     def scale(self, dz: np.ndarray | float) -> np.ndarray:
         """Image magnification (px per mm) of a marker displaced by ``dz``."""

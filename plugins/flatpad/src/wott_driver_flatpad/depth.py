@@ -142,7 +142,7 @@ class ParallaxSolver:
         """ζ = log(Z / Z0) per marker."""
         rhs = -np.asarray(log_ratio, dtype=float)
         rhs[self._fixed] = 0.0
-        zeta = self._lu.solve(rhs)
+        zeta: np.ndarray = self._lu.solve(rhs)
         if not self.parallax:
             return zeta
         for _ in range(nonlinear_passes):
@@ -154,13 +154,13 @@ class ParallaxSolver:
         return zeta
 
 
-def _grid_gradient(layout: PadLayout):
+def _grid_gradient(layout: PadLayout) -> tuple[Any, Any]:  # scipy.sparse CSR matrices (SciPy ships no types)
     """Sparse d/dx and d/dy (1/mm) on the marker grid: central inside, one-sided on the border."""
     import scipy.sparse as sp
 
     r, c = np.divmod(np.arange(layout.n_markers), layout.cols)
 
-    def along(pos: np.ndarray, size: int, stride: int):
+    def along(pos: np.ndarray, size: int, stride: int) -> Any:
         lo = np.where(pos > 0, -stride, 0)
         hi = np.where(pos < size - 1, stride, 0)
         idx = np.arange(layout.n_markers)
@@ -191,7 +191,7 @@ def fill_lost(layout: PadLayout, values: np.ndarray, valid: np.ndarray, sweeps: 
         for axis, shift in ((0, 1), (0, -1), (1, 1), (1, -1)):
             nb = np.roll(out, shift, axis=axis)
             nk = np.roll(known, shift, axis=axis).astype(float)
-            edge = [slice(None)] * 2
+            edge: list[slice | int] = [slice(None)] * 2
             edge[axis] = 0 if shift == 1 else -1
             nk[tuple(edge)] = 0.0  # np.roll wraps around: the opposite border is no neighbour
             acc += nb * nk[..., None]
@@ -230,7 +230,8 @@ class MarkerPhotometry:
     def _integral(gray: np.ndarray) -> np.ndarray:
         import cv2
 
-        return cv2.integral(gray, sdepth=cv2.CV_64F)
+        integral: np.ndarray = cv2.integral(gray, sdepth=cv2.CV_64F)
+        return integral
 
     def _window_sums(self, gray: np.ndarray, points: np.ndarray, integral: np.ndarray) -> np.ndarray:
         h, w = self.shape
@@ -243,9 +244,10 @@ class MarkerPhotometry:
         y1 = np.clip(c[:, 1] + self.half + 1, 0, h)
 
         def box(s: np.ndarray) -> np.ndarray:
-            return s[y1, x1] - s[y0, x1] - s[y1, x0] + s[y0, x0]
+            total: np.ndarray = s[y1, x1] - s[y0, x1] - s[y1, x0] + s[y0, x0]
+            return total
 
-        out = box(integral) - box(self._bg_integral)
+        out: np.ndarray = box(integral) - box(self._bg_integral)
         out[~ok] = np.nan
         return out
 
@@ -253,6 +255,6 @@ class MarkerPhotometry:
         """A / A_rest per marker (NaN for lost markers or a window with no marker light)."""
         s = self._window_sums(gray, points, self._integral(gray)) * self.polarity
         with np.errstate(divide="ignore", invalid="ignore"):
-            r = s / self.reference
+            r: np.ndarray = s / self.reference
         r[~(r > 0)] = np.nan
         return r

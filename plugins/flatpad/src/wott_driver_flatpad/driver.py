@@ -6,8 +6,9 @@ the simulator. The run loop (worker thread, health, reconnecting with backoff,
 a file replaying as a camera that unplugs at its end, a finite simulated scene
 ending the device) is ``wott_vision.driver.CameraDriver``'s; this module only
 turns an image into displacement: ``degraded`` while the first frames do not
-show the configured marker grid at rest, or when the tracker loses more than a
-tenth of the markers (they are filled from their neighbours).
+show the configured marker grid at rest, when markers are unavailable at rest,
+when the tracker loses more than a tenth of the markers (they are filled from
+their neighbours) or a displacement was clamped to the gel's thickness.
 """
 
 from __future__ import annotations
@@ -32,7 +33,13 @@ class FlatPadDriver(CameraDriver):
     estimator: PadEstimator
     last_estimate: PadEstimate | None
 
+    def _recalibrate(self, image: np.ndarray) -> None:
+        self.estimator.recalibrate(image)
+
     def _estimate(self, image: np.ndarray) -> np.ndarray:
-        result = self.last_estimate = self.estimator.update(image)
-        self._report_lost(result.lost, self.description.mesh.n_nodes, "markers")
+        est = self.estimator
+        result = self.last_estimate = est.update(image)
+        n = self.description.mesh.n_nodes
+        self._report_health(result.displacement, self._frame_t_ns, lost=result.lost, total=n, what="markers",
+                            unavailable=est.unavailable_nodes, n_markers=n, clamped=result.clamped)
         return result.displacement

@@ -7,11 +7,20 @@ positions at that depth back into millimetres, so the in-plane part is free of
 the perspective magnification a press causes. Markers the tracker
 loses take their neighbours' values; clamped (border) nodes are held at zero
 as the mesh promises.
+
+A rest image with markers missing, merged or occluded still gives a reference
+(``wott_vision.reference``: detections matched to the optics' expected
+positions) as long as at least ``MIN_AVAILABLE`` of them are seen; the others
+are *unavailable*: their nodes read 0 (never reported as deformed) and are
+listed in ``unavailable_nodes`` for the device's health. Displacements are
+clamped to the pad's physical bound (``PadEstimate.clamped`` counts the nodes):
+in-plane to ``max_shear_mm``, depth to the gel's thickness.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 from wott_vision.markers import as_gray
@@ -19,7 +28,13 @@ from wott_vision.markers import as_gray
 from .depth import DepthModel, MarkerPhotometry, ParallaxSolver, fill_lost
 from .geometry import PadLayout
 
-__all__ = ["PadEstimate", "PadEstimator", "ReferenceNotFound", "order_grid"]
+if TYPE_CHECKING:
+    from wott_vision.markers import MarkerDetector
+    from wott_vision.tracking import MarkerTracker
+
+__all__ = ["MIN_AVAILABLE", "PadEstimate", "PadEstimator", "ReferenceNotFound", "order_grid"]
+
+MIN_AVAILABLE = 0.5  # fewer markers matched at rest: the pad is touched or the grid is wrong
 
 
 class ReferenceNotFound(ValueError):
@@ -32,6 +47,8 @@ class PadEstimate:
     lost: int  # markers the tracker lost in this frame (filled from neighbours)
     area_ratio: np.ndarray  # (N,) A / A_rest as measured, NaN where lost
     cue: np.ndarray  # (N,) x = Z / Z0 - 1, what the depth model maps to dz
+    unavailable: int = 0  # markers not seen at rest (their nodes read 0)
+    clamped: int = 0  # nodes whose displacement was beyond the pad's physical bound
 
 
 def order_grid(points: np.ndarray, layout: PadLayout) -> np.ndarray:
@@ -64,6 +81,11 @@ def order_grid(points: np.ndarray, layout: PadLayout) -> np.ndarray:
     return g.reshape(m, 2)
 
 
+class _DetectArgs(TypedDict):
+    min_area: int
+    max_area: int
+
+
 class PadEstimator:
     """Holds the rest reference and turns each following image into displacements."""
 
@@ -75,13 +97,17 @@ class PadEstimator:
         self.nonlinear_passes = int(nonlinear_passes)
         self.solver = ParallaxSolver(layout, parallax) if depth else None
         area = np.pi * layout.marker_radius_px**2
-        self.detect_kwargs = {"min_area": max(2, int(0.15 * area)), "max_area": int(6 * area) + 16}
+        self.detect_kwargs: _DetectArgs = {"min_area": max(2, int(0.15 * area)),
+                                           "max_area": int(6 * area) + 16}
         self.reference_px: np.ndarray | None = None
-        self._detector = None  # restricted to the pad once the reference is known
+        self._detector: MarkerDetector | None = None  # restricted to the pad once the reference is known
         self._photometry: MarkerPhotometry | None = None
-        self._tracker = None
+        self._tracker: MarkerTracker | None = None
         self._rest_xy: np.ndarray | None = None
         self._free = layout.mesh.free
+        self.available: np.ndarray | None = None  # (M,) bool; None: every marker seen at rest
+        self.max_depth_mm = float(layout.optics.gel_mm)
+        self.max_shear_mm = float(layout.optics.gel_mm)  # a gel sheared further than it is thick tears
 
     @property
     def has_reference(self) -> bool:
@@ -94,7 +120,7 @@ class PadEstimator:
 
         return detect_markers(gray, **self.detect_kwargs)
 
-    def _pad_detector(self, shape: tuple[int, int], px: np.ndarray):
+    def _pad_detector(self, shape: tuple[int, ...], px: np.ndarray) -> MarkerDetector:
         """A detector that only searches the pad (plus a pitch of margin): less image, less time."""
         from wott_vision.markers import MarkerDetector
 
@@ -108,7 +134,18 @@ class PadEstimator:
     def set_reference(self, frame: np.ndarray) -> None:
         """Take this image (pad at rest) as the reference all displacements are measured from."""
         gray = as_gray(frame)
-        px = order_grid(self.detect(gray), self.layout)
+        points = self.detect(gray)
+        available: np.ndarray | None = None
+        try:
+            px = order_grid(points, self.layout)
+        except ReferenceNotFound as e:
+            from wott_vision.reference import match_expected
+
+            match = match_expected(points, self.layout.rest_px)
+            if match.available.mean() < MIN_AVAILABLE:
+                raise e from None
+            px, available = match.px, match.available
+        self.available = None if available is None or available.all() else available
         self._photometry = MarkerPhotometry(gray, px, self.layout.window_half_px,
                                             2 * self.layout.marker_radius_px)
         self.reference_px = px
@@ -116,6 +153,16 @@ class PadEstimator:
         o = self.layout.optics
         self._rest_xy = o.backproject(px, np.zeros(len(px)), self.layout.axis_mm)
         self.reset_tracking()
+
+    def recalibrate(self, frame: np.ndarray) -> None:
+        """``set_reference`` searching the whole image again (the pad may have moved in it); if no grid
+        is found, the previous reference and search area are kept."""
+        narrowed, self._detector = self._detector, None
+        try:
+            self.set_reference(frame)
+        except ReferenceNotFound:
+            self._detector = narrowed
+            raise
 
     def reset_tracking(self) -> None:
         """Restart the tracker from the reference (after a reconnect the last positions are stale)."""
@@ -138,25 +185,53 @@ class PadEstimator:
     def solve(self, gray: np.ndarray, px: np.ndarray) -> PadEstimate:
         """Displacements from tracked positions ``px`` (NaN rows: lost) in image ``gray``."""
         lay, o, axis = self.layout, self.layout.optics, self.layout.axis_mm
-        ref = self.reference_px
+        ref, photometry, rest_xy = self.reference_px, self._photometry, self._rest_xy
+        if ref is None or photometry is None or rest_xy is None:  # set together by set_reference
+            raise ReferenceNotFound("no reference image yet")
         seen = np.isfinite(px).all(axis=1)
-        lost = int((~seen).sum())
+        available = self.available
+        if available is not None:
+            seen &= available
+        lost = int((~seen).sum()) - (0 if available is None else int((~available).sum()))
         if lost:
             px = ref + fill_lost(lay, px - ref, seen)
-        if self.depth:
-            ratio = self._photometry.area_ratio(gray, px)
+        solver = self.solver  # there is one exactly when ``depth`` is set
+        if solver is not None:
+            ratio = photometry.area_ratio(gray, px)
             ratio[~seen] = np.nan
             good = np.isfinite(ratio)
             log_ratio = np.log(np.where(good, ratio, 1.0))
             if not good.all():
                 log_ratio = fill_lost(lay, log_ratio, good)
-            cue = np.expm1(self.solver.solve(log_ratio, self.nonlinear_passes))
+            cue = np.expm1(solver.solve(log_ratio, self.nonlinear_passes))
             dz = np.nan_to_num(self.depth_model.dz(cue), nan=0.0, posinf=0.0, neginf=0.0)
         else:
             ratio = np.ones(len(px))
             cue = np.zeros(len(px))
             dz = np.zeros(len(px))
-        xy = o.backproject(px, dz, axis) - self._rest_xy
+        xy = o.backproject(px, dz, axis) - rest_xy
         d = np.column_stack([xy, dz])
         d[~self._free] = 0.0
-        return PadEstimate(d, lost, ratio, cue)
+        if available is not None:
+            d[~available] = 0.0  # unknown, not deformed: the health lists these nodes
+        clamped = _clamp(d, self.max_shear_mm, self.max_depth_mm)
+        return PadEstimate(d, lost, ratio, cue, 0 if available is None else int((~available).sum()), clamped)
+
+    @property
+    def unavailable_nodes(self) -> list[int]:
+        """Nodes whose marker was not seen at rest (marker m is node m on the pad)."""
+        return [] if self.available is None else np.flatnonzero(~self.available).tolist()
+
+
+def _clamp(d: np.ndarray, max_shear_mm: float, max_depth_mm: float) -> int:
+    """Clamp ``d`` in place to the physical bound: |dz| <= depth, |(dx, dy)| <= shear; nodes clamped."""
+    dz = d[:, 2]
+    over_z = np.abs(dz) > max_depth_mm
+    shear2 = d[:, 0] ** 2 + d[:, 1] ** 2
+    over_xy = shear2 > max_shear_mm**2
+    if not (over_z.any() or over_xy.any()):
+        return 0
+    np.clip(dz, -max_depth_mm, max_depth_mm, out=dz)
+    if over_xy.any():
+        d[over_xy, :2] *= (max_shear_mm / np.sqrt(shear2[over_xy]))[:, None]
+    return int((over_z | over_xy).sum())

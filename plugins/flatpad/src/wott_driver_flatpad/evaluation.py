@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wott_hub.sim.scene import Scene
+from wott_hub.plugin_api import Scene
 
 from .estimator import PadEstimator
 from .geometry import PadLayout

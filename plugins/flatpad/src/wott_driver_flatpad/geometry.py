@@ -13,7 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
-from wott_hub.tactile import SkinMesh, flat_pad
+from wott_hub.plugin_api import SkinMesh, flat_pad
 
 from .camera import PadOptics
 

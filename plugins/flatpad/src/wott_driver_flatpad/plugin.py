@@ -7,9 +7,9 @@ worker thread when the device starts.
 
 from __future__ import annotations
 
-from wott_hub.plugins import DeviceConfig, FamilyInfo, hookimpl, naming_device
+from wott_hub.plugin_api import DeviceConfig, Driver, FamilyInfo, hookimpl, naming_device
 
-from .settings import FAMILY, SCHEMA, open_pad
+from .settings import FAMILY, PadSettings, open_pad
 
 __all__ = ["wott_hub_demo_devices", "wott_hub_families", "wott_hub_open_device"]
 
@@ -20,16 +20,14 @@ def wott_hub_families() -> list[FamilyInfo]:
         FAMILY,
         "Flat vision pad (GelSight/DIGIT-style): one camera under a gel with a rows x cols marker "
         "grid; shear from marker motion, depth from apparent marker area (docs/flat-pad.md).",
-        SCHEMA,
+        PadSettings,
     )]
 
 
 @hookimpl
-def wott_hub_open_device(config: DeviceConfig):
-    if config.family == FAMILY:
-        with naming_device(config):
-            return open_pad(config.id, dict(config.settings))
-    return None
+def wott_hub_open_device(config: DeviceConfig) -> Driver:
+    with naming_device(config):  # the registry calls this only for FAMILY's devices
+        return open_pad(config.id, dict(config.settings))
 
 
 @hookimpl

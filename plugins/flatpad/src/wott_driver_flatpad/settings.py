@@ -1,4 +1,4 @@
-"""The ``flat-vision`` family's device settings: their JSON Schema and how a driver is built from them.
+"""The ``flat-vision`` family's device settings (a ``SettingsModel``) and how a driver is built from them.
 
 Nothing here imports cv2: building a driver only wires objects together; the
 camera is opened (and cv2 imported) inside the driver's worker thread.
@@ -6,22 +6,38 @@ camera is opened (and cv2 imported) inside the driver's worker thread.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 
-from wott_vision.schema import BACKOFF_PROPERTIES, RENDER_PROPERTIES, number, simulator_properties, table
-from wott_vision.settings import backoff, check_material, defaults, section, simulator_source
+from wott_vision.schema import FPS_DESCRIPTION, RenderTable, VisionSettings
+from wott_vision.settings import backoff, check_material, recorded_rate, section, simulator_source
 
-from wott_hub.drivers.base import DriverError
-from wott_hub.tactile import MATERIALS, CoordinateFrame, DeviceDescription, SkinShape
+from wott_hub.plugin_api import (
+    MATERIALS,
+    CoordinateFrame,
+    DeviceDescription,
+    DriverError,
+    Meta,
+    SettingsTable,
+    SkinShape,
+    model_fields,
+    read_settings,
+    settings_schema,
+)
 
 from .camera import PadOptics
 from .depth import DepthModel
 from .geometry import GRID_MAX, GRID_MIN, PadLayout
 from .simulator import RenderSettings
 
-__all__ = ["FAMILY", "SCHEMA", "demo_scene_path", "open_pad"]
+if TYPE_CHECKING:  # the driver and camera modules import cv2: loaded when a device opens
+    from wott_vision.camera import CameraReader
+
+    from .driver import FlatPadDriver
+
+__all__ = ["FAMILY", "SCHEMA", "OpticsTable", "PadRenderTable", "PadSettings", "demo_scene_path", "open_pad"]
 
 FAMILY = "flat-vision"
 
@@ -30,124 +46,132 @@ def demo_scene_path() -> Path:
     return Path(str(resources.files("wott_driver_flatpad") / "scenes" / "demo.toml"))
 
 
-OPTICS_SCHEMA = table("Pinhole camera under the gel (docs/flat-pad.md, camera model).", {
-    "width": {"type": "integer", "minimum": 16, "default": 640, "description": "Image width, px."},
-    "height": {"type": "integer", "minimum": 16, "default": 480, "description": "Image height, px."},
-    "focal_px": number(480.0, "Focal length, px.", exclusiveMinimum=0),
-    "air_gap_mm": number(20.0, "Lens to acrylic, mm.", exclusiveMinimum=0),
-    "acrylic_mm": number(3.0, "Acrylic plate thickness, mm.", minimum=0),
-    "acrylic_n": number(1.49, "Refractive index of the acrylic.", minimum=1),
-    "gel_n": number(1.41, "Refractive index of the gel.", minimum=1),
-    "principal_px": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
-                     "description": "Principal point (cx, cy), px; default the image centre."},
-    "centre_mm": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
-                  "description": "Device (x, y) on the optical axis, mm; default the pad centre."},
-})
-
-RENDER_SCHEMA = table("Simulator image chain (source = \"sim\" only).", {
-    **RENDER_PROPERTIES,
-    "refine": {"type": "integer", "minimum": 1, "maximum": 8, "default": 2,
-               "description": "Ground-truth marker-area grid: pitch / refine."},
-})
-
-SCHEMA: dict[str, Any] = {
-    "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "title": "flat-vision device settings",
-    "type": "object",
-    "additionalProperties": False,
-    "properties": {
-        "title": {"type": "string", "description": "Human-readable name; default the device id."},
-        "rows": {"type": "integer", "minimum": GRID_MIN, "maximum": GRID_MAX, "default": 16,
-                 "description": "Marker rows (along device y)."},
-        "cols": {"type": "integer", "minimum": GRID_MIN, "maximum": GRID_MAX, "default": 16,
-                 "description": "Marker columns (along device x)."},
-        "pitch_mm": number(1.5, "Marker spacing, mm.", exclusiveMinimum=0),
-        "marker_radius_mm": number(0.35, "Printed marker radius, mm (< 0.3 pitch).", exclusiveMinimum=0),
-        "thickness_mm": number(4.0, "Gel thickness, mm.", exclusiveMinimum=0),
-        "material": {"type": "string", "enum": sorted(MATERIALS), "default": "ecoflex-00-50",
-                     "description": "Gel material."},
-        "epsilon_mm": number(0.1, "Displacement above which a node counts as deformed, mm (above the "
-                             "~0.07 mm image-noise floor at rest, docs/flat-pad.md).",
-                             exclusiveMinimum=0),
-        "source": {"oneOf": [{"type": "integer", "minimum": 0}, {"type": "string", "minLength": 1}],
-                   "default": "sim",
-                   "description": "\"sim\" (simulator), a camera index, or a video file / image "
-                                  "sequence pattern / stream URL."},
-        **simulator_properties(60.0),
-        "depth_model": {"type": "string", "default": "physical",
-                        "description": "\"physical\" (ideal optics), \"calibrate\" (fit on simulated "
-                                       "presses at start-up) or a JSON file written by DepthModel.save."},
-        "parallax": {"type": "boolean", "default": True,
-                     "description": "Correct marker areas for the foreshortening of a sloped gel seen "
-                                    "off-axis (docs/flat-pad.md); false: area ratio read as depth alone."},
-        **BACKOFF_PROPERTIES,
-        "optics": OPTICS_SCHEMA,
-        "render": RENDER_SCHEMA,
-    },
-}
+Pair = Annotated[list[Annotated[float, Meta(ge=-100_000, le=100_000)]], Meta(min_length=2, max_length=2)]
 
 
-def layout_from(s: dict[str, Any]) -> PadLayout:
-    """The pad of settings ``s`` (defaults filled in)."""
+class OpticsTable(SettingsTable, frozen=True):
+    """Pinhole camera under the gel (docs/flat-pad.md, camera model)."""
+
+    width: Annotated[int, Meta(ge=16, le=8192, description="Image width, px.")] = 640
+    height: Annotated[int, Meta(ge=16, le=8192, description="Image height, px.")] = 480
+    focal_px: Annotated[float, Meta(gt=0, le=100_000, description="Focal length, px.")] = 480.0
+    air_gap_mm: Annotated[float, Meta(gt=0, le=1000, description="Lens to acrylic, mm.")] = 20.0
+    acrylic_mm: Annotated[float, Meta(ge=0, le=100, description="Acrylic plate thickness, mm.")] = 3.0
+    acrylic_n: Annotated[float, Meta(ge=1, le=3, description="Refractive index of the acrylic.")] = 1.49
+    gel_n: Annotated[float, Meta(ge=1, le=3, description="Refractive index of the gel.")] = 1.41
+    principal_px: Annotated[Pair, Meta(description=(
+        "Principal point (cx, cy), px; default the image centre."))] | None = None
+    centre_mm: Annotated[list[Annotated[float, Meta(ge=-10_000, le=10_000)]], Meta(
+        min_length=2, max_length=2,
+        description="Device (x, y) on the optical axis, mm; default the pad centre.")] | None = None
+
+
+class PadRenderTable(RenderTable, frozen=True):
+    """Simulator image chain (source = "sim" only)."""
+
+    refine: Annotated[int, Meta(ge=1, le=8, description="Ground-truth marker-area grid: pitch / refine.")] = 2
+
+
+class PadSettings(VisionSettings):
+    """A flat-vision device's settings, declared once: types, bounds, defaults, descriptions;
+    ``SCHEMA`` is derived for docs and the registry."""
+
+    json_schema_extra: ClassVar[dict[str, Any]] = {"title": "flat-vision device settings"}
+
+    rows: Annotated[int, Meta(ge=GRID_MIN, le=GRID_MAX, description="Marker rows (along device y).")] = 16
+    cols: Annotated[int, Meta(ge=GRID_MIN, le=GRID_MAX, description="Marker columns (along device x).")] = 16
+    pitch_mm: Annotated[float, Meta(gt=0, le=100, description="Marker spacing, mm.")] = 1.5
+    marker_radius_mm: Annotated[float, Meta(gt=0, le=30, description=(
+        "Printed marker radius, mm (< 0.3 pitch)."))] = 0.35
+    thickness_mm: Annotated[float, Meta(gt=0, le=100, description="Gel thickness, mm.")] = 4.0
+    material: Annotated[str, Meta(extra_json_schema={"enum": sorted(MATERIALS)},
+                                  description="Gel material.")] = "ecoflex-00-50"
+    epsilon_mm: Annotated[float, Meta(gt=0, le=100, description=(
+        "Displacement above which a node counts as deformed, mm (above the ~0.07 mm image-noise "
+        "floor at rest, docs/flat-pad.md)."))] = 0.1
+    source: Annotated[Annotated[int, Meta(ge=0)] | Annotated[str, Meta(min_length=1)], Meta(
+        extra={"expects": "\"sim\", a camera index or a video file / image sequence / stream URL"},
+        description="\"sim\" (simulator), a camera index, or a video file / image sequence pattern / "
+                    "stream URL.")] = "sim"
+    fps: Annotated[float, Meta(gt=0, le=1000, description=FPS_DESCRIPTION)] = 60.0
+    depth_model: Annotated[str, Meta(description=(
+        "\"physical\" (ideal optics), \"calibrate\" (fit on simulated presses at start-up) or a JSON "
+        "file written by DepthModel.save."))] = "physical"
+    parallax: Annotated[bool, Meta(description=(
+        "Correct marker areas for the foreshortening of a sloped gel seen off-axis (docs/flat-pad.md); "
+        "false: area ratio read as depth alone."))] = True
+    optics: Annotated[OpticsTable, Meta(description=OpticsTable.__doc__)] = OpticsTable()
+    render: Annotated[PadRenderTable, Meta(description=PadRenderTable.__doc__)] = PadRenderTable()
+
+
+SCHEMA: dict[str, Any] = settings_schema(PadSettings)
+
+
+def layout_from(s: PadSettings) -> PadLayout:
+    """The pad of read settings ``s``."""
     try:
-        o = defaults(OPTICS_SCHEMA, s.get("optics"), "optics.")
+        o = model_fields(s.optics)
         for key in ("principal_px", "centre_mm"):
-            if key in o:
+            if o[key] is not None:
                 o[key] = tuple(float(v) for v in o[key])
-        optics = PadOptics(gel_mm=float(s["thickness_mm"]), **o)
-        return PadLayout(int(s["rows"]), int(s["cols"]), float(s["pitch_mm"]),
-                         float(s["marker_radius_mm"]), optics)
+        optics = PadOptics(gel_mm=s.thickness_mm, **o)
+        return PadLayout(s.rows, s.cols, s.pitch_mm, s.marker_radius_mm, optics)
     except (TypeError, ValueError) as e:
         raise DriverError(f"flat-vision settings: {e}") from None
 
 
-def describe(device_id: str, s: dict[str, Any], layout: PadLayout) -> DeviceDescription:
+def describe(device_id: str, s: PadSettings, layout: PadLayout) -> DeviceDescription:
     span_x = (layout.cols - 1) * layout.pitch_mm
     span_y = (layout.rows - 1) * layout.pitch_mm
     return DeviceDescription(
-        id=device_id, title=str(s.get("title") or device_id), family=FAMILY,
-        shape=SkinShape("rectangularPrism", length_mm=span_x, width_mm=span_y,
-                        height_mm=float(s["thickness_mm"])),
-        material=MATERIALS[s["material"]], mesh=layout.mesh, epsilon_mm=float(s["epsilon_mm"]),
-        thickness_mm=float(s["thickness_mm"]), frame=CoordinateFrame(origin_name="cornerOfPad"),
+        id=device_id, title=s.title or device_id, family=FAMILY,
+        shape=SkinShape("rectangularPrism", length_mm=span_x, width_mm=span_y, height_mm=s.thickness_mm),
+        material=MATERIALS[s.material], mesh=layout.mesh, epsilon_mm=s.epsilon_mm,
+        thickness_mm=s.thickness_mm, frame=CoordinateFrame(origin_name="cornerOfPad"),
         description=f"Flat vision pad: {layout.rows}x{layout.cols} markers at {layout.pitch_mm} mm, "
                     f"one camera at {layout.optics.px_per_mm:.1f} px/mm.",
     )
 
 
-def open_pad(device_id: str, settings: dict[str, Any], *, max_frames: int | None = None):
+def open_pad(device_id: str, settings: Mapping[str, Any], *, max_frames: int | None = None) -> FlatPadDriver:
     """A ``FlatPadDriver`` for these settings (nothing is opened until it runs)."""
     from .driver import FlatPadDriver
     from .estimator import PadEstimator
     from .simulator import PadSimulator
 
-    s = defaults(SCHEMA, settings)
+    s = read_settings(PadSettings, settings)
     check_material(s)
     layout = layout_from(s)
     description = describe(device_id, s, layout)
-    render = section(RenderSettings, RENDER_SCHEMA, s.get("render"), "render")
-    spec = str(s["depth_model"])
+    render = section(RenderSettings, s.render, "render")
+    spec = s.depth_model
     estimator = PadEstimator(layout, None if spec == "calibrate" else _depth_model(spec, layout),
-                             parallax=bool(s["parallax"]))
+                             parallax=s.parallax)
     prepare = None
     if spec == "calibrate":
         def prepare() -> None:
             from .calibration import calibrate
 
-            estimator.depth_model = calibrate(layout, render, parallax=estimator.solver.parallax)
-    source = s["source"]
+            solver = estimator.solver
+            assert solver is not None  # the estimator has depth on: there is a solver
+            estimator.depth_model = calibrate(layout, render, parallax=solver.parallax)
+    source = s.source
     if source == "sim":
         open_source, name = simulator_source(s, demo_scene_path(),
                                              lambda scene: PadSimulator(layout, scene, render))
     else:
-        def open_source():
+        fps, realtime = recorded_rate(settings, s, source)
+
+        def open_source() -> CameraReader:
             from wott_vision.camera import open_source as open_camera
 
-            return open_camera(source)
+            return open_camera(source, fps=fps, realtime=realtime)
 
         name = f"camera {source!r}"
-    return FlatPadDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
-                         max_frames=max_frames, prepare=prepare)
+    driver = FlatPadDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
+                           max_frames=max_frames, prepare=prepare)
+    driver.below_threshold_s = s.below_threshold_s
+    return driver
 
 
 def _depth_model(spec: str, layout: PadLayout) -> DepthModel:

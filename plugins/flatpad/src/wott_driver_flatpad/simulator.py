@@ -24,8 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wott_hub.sim.scene import Scene
-from wott_hub.tactile import flat_pad
+from wott_hub.plugin_api import Scene, flat_pad
 
 from .geometry import PadLayout
 
@@ -67,7 +66,8 @@ class PadSimulator:
         h = lay.pitch_mm / k
         d_c = np.gradient(px, h, axis=1)[::k, ::k]
         d_r = np.gradient(px, h, axis=0)[::k, ::k]
-        return (d_c[..., 0] * d_r[..., 1] - d_r[..., 0] * d_c[..., 1]).ravel()
+        det: np.ndarray = (d_c[..., 0] * d_r[..., 1] - d_r[..., 0] * d_c[..., 1]).ravel()
+        return det
 
     def markers(self, t_s: float, truth: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Image positions (M, 2) px and radii (M,) px of the markers at ``t_s``."""

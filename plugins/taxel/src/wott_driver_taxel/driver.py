@@ -1,4 +1,13 @@
-"""The taxel array as a hub driver: serial frames in, ``TactileFrame``s out."""
+"""The taxel array as a hub driver: serial frames in, ``TactileFrame``s out.
+
+``frames()`` is restartable: the hub calls it again after any exception (a
+frame that fails the ``TactileFrame`` check, a bug), so each call owns a fresh
+``SerialReader`` and the previous one is always stopped and joined first, even
+when its generator was abandoned rather than closed. The exception that ended
+a stream stays in ``health()`` (``frames() failed: ...``) and, after the
+restart, as a suffix of the link's health until a frame gets through again:
+the cause is never replaced by a symptom of the restart.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +17,15 @@ from typing import Any
 
 import numpy as np
 
-from wott_hub.drivers.backoff import Backoff
-from wott_hub.drivers.base import Driver, DriverError, Health
-from wott_hub.tactile import DeviceDescription, TactileFrame
+from wott_hub.plugin_api import (
+    Backoff,
+    DeviceDescription,
+    Driver,
+    DriverError,
+    Health,
+    TactileFrame,
+    Tareable,
+)
 
 from .compliance import Compliance
 from .protocol import Counters
@@ -20,7 +35,7 @@ from .simulator import TaxelSimulator
 __all__ = ["TaxelDriver"]
 
 
-class TaxelDriver(Driver):
+class TaxelDriver(Driver, Tareable):
     """A rows x cols taxel array on ``port`` (or on its own simulator's pty).
 
     Each taxel's pressure becomes an inward displacement along the mesh
@@ -59,33 +74,71 @@ class TaxelDriver(Driver):
         self._backoff = backoff
         self._opener = opener
         self._reader: SerialReader | None = None
+        self._failure = ""  # the exception that ended the last stream, until a frame gets through
+        self._link_health: tuple[Health, str] = (Health.disconnected, "not started")
         self._inward = -description.mesh.normals
+        self._zero: np.ndarray | None = None  # counts at rest after a tare, subtracted from every frame
+        self._tare_next = False
         self.set_health(Health.disconnected, "not started")
 
     async def frames(self) -> AsyncIterator[TactileFrame]:
-        if self._reader is not None:
-            raise DriverError(f"device {self.description.id!r}: frames() is already being iterated")
+        await self._retire_reader()  # a previous stream that ended abnormally: its port is released
         port = self.port
         if self.simulator is not None:
             port = self.simulator.start()
         assert port is not None
         self._reader = reader = SerialReader(
             port, shape=self.shape, baudrate=self.baudrate, protocol=self.protocol, counters=self.counters,
-            backoff=self._backoff, opener=self._opener, on_health=self.set_health,
+            backoff=self._backoff, opener=self._opener, on_health=self._on_link_health,
         )
         compliance = self.compliance
+        failed = False
         try:
             async for t_ns, raw in reader.frames():
                 self.last_seq = raw.seq
                 counts = raw.values.astype(np.float64)
-                yield TactileFrame(t_ns, compliance.normal_mm(counts)[:, None] * self._inward,
-                                   pressure=compliance.pressure_kpa(counts))
+                if self._tare_next:  # this frame's readings are the new zero
+                    self._zero, self._tare_next = counts.copy(), False
+                if self._zero is not None:
+                    counts = np.maximum(counts - self._zero, 0.0)
+                frame = TactileFrame(t_ns, compliance.normal_mm(counts)[:, None] * self._inward,
+                                     pressure=compliance.pressure_kpa(counts))
+                if self._failure:
+                    self._failure = ""
+                    self.set_health(*self._link_health)
+                yield frame
+        except Exception as e:
+            failed, self._failure = True, f"{type(e).__name__}: {e}"
+            raise
         finally:
-            reader.stop()
+            await self._retire_reader(reader)
+            if failed:  # after the join: the stopping thread's last report must not hide the cause
+                self.set_health(Health.disconnected, f"frames() failed: {self._failure}")
+
+    def tare(self) -> str:
+        """Zero offsets: the next frame's readings become every taxel's zero (drift, a preloaded skin)."""
+        self._tare_next = True
+        return "the next frame's readings are each taxel's new zero"
+
+    def _on_link_health(self, state: Health, reason: str) -> None:
+        """The reader's health (from its thread), with the cause of the last failure while it stands."""
+        self._link_health = (state, reason)
+        failure = self._failure
+        if failure and state != Health.ok:
+            reason = f"{reason} (restarted after {failure})" if reason else f"restarted after {failure}"
+        self.set_health(state, reason)
+
+    async def _retire_reader(self, reader: SerialReader | None = None) -> None:
+        """Stop and join ``reader`` (default: the current one) and forget it if it is the current one."""
+        reader = reader or self._reader
+        if reader is None:
+            return
+        if reader is self._reader:
+            self._reader = None
+        await reader.close()
 
     async def close(self) -> None:
-        if self._reader is not None:
-            await self._reader.close()
+        await self._retire_reader()
         if self.simulator is not None:
             await asyncio.to_thread(self.simulator.stop)
         self.set_health(Health.disconnected, "closed")

@@ -249,6 +249,8 @@ class LineDecoder(_Decoder):
     are discarded: most likely the tail of a line the device was already sending.
     """
 
+    expect: tuple[int, int]  # required here: a line does not carry its shape
+
     def __init__(
         self, expect: tuple[int, int], counters: Counters | None = None, joining: bool = False
     ) -> None:
@@ -321,7 +323,7 @@ class LineDecoder(_Decoder):
             self._framed()
             self.counters.wrong_shape += 1
             return
-        rows, cols = self.expect  # type: ignore[misc]
+        rows, cols = self.expect
         self._deliver(RawFrame(seq, rows, cols, values.astype(np.uint16)), out)
 
     def reset(self) -> None:

@@ -23,8 +23,7 @@ from typing import Any
 
 import serial
 
-from wott_hub.drivers.backoff import Backoff
-from wott_hub.drivers.base import Health
+from wott_hub.plugin_api import Backoff, Health
 
 from .protocol import Counters, RawFrame, make_decoder
 
@@ -73,7 +72,7 @@ class SerialReader:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._serial: Any = None
-        self._queue: asyncio.Queue | None = None
+        self._queue: asyncio.Queue[Any] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._queue_size = queue_size
         self._ok_snapshot = self.counters.as_dict()

@@ -22,8 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wott_hub.sim.scene import Scene
-from wott_hub.tactile import SkinMesh
+from wott_hub.plugin_api import Scene, SkinMesh
 
 from .compliance import Compliance
 from .protocol import SEQ_MODULO, encode_frame, encode_line

@@ -17,7 +17,23 @@ Health, as the driver contract asks:
 - ``degraded`` while the first frames do not show the marker grid at rest (no
   reference yet: nothing is yielded), or whatever the subclass's estimate says
   (``_report_lost``: more than a tenth of the markers lost).
-- ``ok`` otherwise.
+- ``ok`` otherwise; ``ok`` with the reason ``below threshold: ...`` while the
+  skin has been displaced more than ``BELOW_THRESHOLD_FLOOR`` x ε but never
+  above ε for ``below_threshold_s`` (a press too light to be reported: the
+  silence is explained).
+
+Markers unavailable at rest (``unavailable_nodes``: missing, merged or occluded
+markers, their nodes read 0) and displacements clamped to the family's
+physical bound are reported in the health reason too (``_report_health``); the hub
+serves ``unavailable_nodes`` as the observable ``unavailableNodes`` property and gives
+its processor ``below_threshold_floor``/``below_threshold_s`` (docs/processing.md).
+
+Time: a live camera's frames are stamped with the hub clock when read. A
+recorded source (a reader with ``recorded`` true: video files, image
+sequences) stamps each frame with its recorded time ``t_s`` from the start,
+mapped onto the hub clock when the source was opened (a replayed loop continues
+after the last frame, never backwards); it paces itself (``realtime``) or runs
+as fast as read. A simulator with ``realtime = false`` uses its scene time.
 
 The rest reference survives a reconnect (the camera did not move relative to
 the skin); only the tracker restarts from it. Nothing here imports cv2: the
@@ -35,13 +51,21 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from wott_hub.drivers.backoff import Backoff
-from wott_hub.drivers.base import Driver, Health
-from wott_hub.tactile import DeviceDescription, TactileFrame
+from wott_hub.plugin_api import (
+    Backoff,
+    DeviceDescription,
+    Driver,
+    Health,
+    Recalibratable,
+    TactileFrame,
+    Tareable,
+)
 
-__all__ = ["LOST_FRACTION_DEGRADED", "CameraDriver", "FrameReader", "SourceEnded", "SourceLost"]
+__all__ = ["BELOW_THRESHOLD_FLOOR", "LOST_FRACTION_DEGRADED", "CameraDriver", "FrameReader", "SourceEnded",
+           "SourceLost"]
 
 LOST_FRACTION_DEGRADED = 0.1
+BELOW_THRESHOLD_FLOOR = 0.75  # x epsilon: above the image-noise floor at rest of both families
 
 
 class FrameReader(Protocol):
@@ -70,7 +94,7 @@ class SourceEnded(Exception):
     """A finite simulated source played to its end: the device is done, not lost."""
 
 
-class CameraDriver(Driver):
+class CameraDriver(Driver, Tareable, Recalibratable):
     """One camera-based skin: ``open_source()`` makes a reader, the estimator turns frames into D.
 
     A subclass names what its estimator raises while the frame shows no grid
@@ -84,6 +108,7 @@ class CameraDriver(Driver):
 
     reference_error: ClassVar[type[Exception]]
     rest_subject: ClassVar[str] = "skin"
+    below_threshold_floor: ClassVar[float] = BELOW_THRESHOLD_FLOOR  # the hub's processor uses it too
     source_name: str = "camera"
 
     def __init__(
@@ -114,6 +139,14 @@ class CameraDriver(Driver):
         self._closed = asyncio.Event()
         self._wall0_ns = time.time_ns()
         self._mono0_ns = time.monotonic_ns()
+        self._base_ns: int | None = None  # hub time of a recorded source's t_s = 0
+        self._last_t_ns = 0
+        self.below_threshold_s = 1.0  # 0: never report a press below epsilon
+        self._below_since_ns: int | None = None
+        self.unavailable_nodes: list[int] = []
+        self.clamped_frames = 0
+        self._frame_t_ns = 0  # time of the frame being estimated (``_estimate`` reads it)
+        self._rest_request: str | None = None  # "tare" | "recalibrate", done on the next frame read
 
     @abc.abstractmethod
     def _estimate(self, images: Any) -> np.ndarray | None:
@@ -128,6 +161,39 @@ class CameraDriver(Driver):
         else:
             self.set_health(Health.ok)
 
+    def _report_health(self, displacement: np.ndarray, t_ns: int, *, lost: int, total: int, what: str,
+                       unavailable: list[int], n_markers: int, clamped: int,
+                       unavailable_markers: int | None = None) -> None:
+        """Health of an estimated frame: unavailable markers, tracking losses, clamps, a press below ε."""
+        reasons = []
+        self.unavailable_nodes = unavailable
+        if unavailable:
+            shown = ", ".join(map(str, unavailable[:32])) + (", ..." if len(unavailable) > 32 else "")
+            k = len(unavailable) if unavailable_markers is None else unavailable_markers
+            reasons.append(f"{k} of {n_markers} markers unavailable; unknown nodes, reported at rest: "
+                           f"{shown}")
+        if lost > LOST_FRACTION_DEGRADED * total:
+            reasons.append(f"tracker lost {lost} of {total} {what}")
+        if clamped:
+            self.clamped_frames += 1
+            reasons.append(f"{clamped} nodes beyond the physical bound, clamped")
+        if reasons:
+            self.set_health(Health.degraded, "; ".join(reasons))
+            return
+        eps = self.description.epsilon_mm
+        peak = float(np.sqrt(np.einsum("ij,ij->i", displacement, displacement).max(initial=0.0)))
+        if BELOW_THRESHOLD_FLOOR * eps < peak <= eps and self.below_threshold_s > 0:
+            if self._below_since_ns is None:
+                self._below_since_ns = t_ns
+            if (t_ns - self._below_since_ns) / 1e9 >= self.below_threshold_s:  # a stable reason: one change
+                floor = BELOW_THRESHOLD_FLOOR * eps
+                self.set_health(Health.ok, f"below threshold: displaced {floor:g}-{eps:g} mm (epsilon "
+                                           f"{eps:g} mm) for over {self.below_threshold_s:g} s: not reported")
+                return
+        else:
+            self._below_since_ns = None
+        self.set_health(Health.ok)
+
     # -- worker-thread side ----------------------------------------------------
     def _open(self) -> None:
         if self._prepare is not None:  # one-off start-up work (a depth calibration), off the event loop
@@ -140,6 +206,9 @@ class CameraDriver(Driver):
                 _release(reader)
                 raise SourceLost(f"cannot open {self.source_name}")
             self._reader = reader
+            if getattr(reader, "recorded", False):  # continue after the last frame, on the hub clock
+                self._base_ns = max(self._wall0_ns + time.monotonic_ns() - self._mono0_ns,
+                                    self._last_t_ns + 1_000_000)
         if self.estimator.has_reference:
             self.estimator.reset_tracking()
 
@@ -163,7 +232,12 @@ class CameraDriver(Driver):
                 raise SourceEnded
             raise SourceLost(getattr(reader, "failure", "")
                              or f"{self.source_name} returned no frame (unplugged, or end of stream)")
+        self._last_t_ns = max(self._last_t_ns, t_ns)
+        request, self._rest_request = self._rest_request, None
+        if request is not None and self.estimator.has_reference:
+            self._take_rest(request, images)
         if self.estimator.has_reference:
+            self._frame_t_ns = t_ns
             displacement = self._estimate(images)
         else:
             try:
@@ -176,9 +250,37 @@ class CameraDriver(Driver):
         self.last_truth = truth
         return None if displacement is None else TactileFrame(t_ns, displacement)
 
+    # -- device actions (``Tareable``, ``Recalibratable``): requested on the loop, done in the thread --
+    def tare(self) -> str:
+        self._rest_request = "tare"
+        return f"the next frame is the {self.rest_subject}'s new rest reference"
+
+    def recalibrate(self) -> str:
+        self._rest_request = "recalibrate"
+        return f"the marker grid is found again in the next frame (the {self.rest_subject} must be at rest)"
+
+    def _recalibrate(self, images: Any) -> None:
+        """Find the marker grid again in ``images``; a subclass widens its search first if it narrowed it."""
+        self.estimator.set_reference(images)
+
+    def _take_rest(self, request: str, images: Any) -> None:
+        """A new reference from ``images``; one that cannot be taken keeps the previous one (health says)."""
+        try:
+            if request == "recalibrate":
+                self._recalibrate(images)
+            else:
+                self.estimator.set_reference(images)
+        except self.reference_error as e:
+            self.set_health(Health.degraded, f"{request} failed, the previous reference is kept: {e}")
+            return
+        self.set_health(Health.ok)
+
     def _timestamp(self, reader: FrameReader) -> int:
-        """Wall-clock ns from the monotonic clock (never backwards); scene time for a fast simulator."""
+        """Wall-clock ns from the monotonic clock (never backwards); the recorded time of a file;
+        scene time for a fast simulator."""
         t_s = getattr(reader, "t_s", None)
+        if t_s is not None and self._base_ns is not None and getattr(reader, "recorded", False):
+            return self._base_ns + int(round(float(t_s) * 1e9))
         if t_s is not None and not getattr(reader, "realtime", True):
             return self._wall0_ns + int(round(float(t_s) * 1e9))
         return self._wall0_ns + time.monotonic_ns() - self._mono0_ns

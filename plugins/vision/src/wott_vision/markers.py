@@ -112,6 +112,7 @@ class MarkerDetector:
     areas: np.ndarray = field(default_factory=lambda: np.empty(0), init=False, repr=False)
     _roi: tuple[int, int, int, int] | None = field(default=None, init=False, repr=False)
     _mask_roi: np.ndarray | None = field(default=None, init=False, repr=False)
+    _mask_shape: tuple[int, ...] = field(default=(), init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.centroid not in CENTROIDS:
@@ -131,6 +132,7 @@ class MarkerDetector:
                 raise ValueError("mask selects no pixel")
             x0, x1, y0, y1 = int(xs.min()), int(xs.max()) + 1, int(ys.min()), int(ys.max()) + 1
             self._roi = (x0, y0, x1, y1)
+            self._mask_shape = m.shape
             self._mask_roi = np.ascontiguousarray((m[y0:y1, x0:x1] != 0).astype(np.uint8) * 255)
 
     def __call__(self, gray: np.ndarray) -> np.ndarray:
@@ -138,8 +140,8 @@ class MarkerDetector:
         x0 = y0 = 0
         mask = None
         if self._roi is not None:
-            if self.mask.shape != g.shape:
-                raise ValueError(f"mask shape {self.mask.shape} differs from image shape {g.shape}")
+            if self._mask_shape != g.shape:
+                raise ValueError(f"mask shape {self._mask_shape} differs from image shape {g.shape}")
             x0, y0, x1, y1 = self._roi
             g = g[y0:y1, x0:x1]
             mask = self._mask_roi
@@ -182,7 +184,7 @@ def detect_markers(
 
 
 def _detect(g: np.ndarray, mask: np.ndarray | None, threshold: int | None, min_area: float,
-            max_area: float, weighted: bool, split: bool) -> np.ndarray:
+            max_area: float, weighted: bool, split: bool) -> tuple[np.ndarray, np.ndarray]:
     """Work on the list of foreground pixels only (about a tenth of the frame).
 
     OpenCV's component statistics cost more than the labelling itself, so areas

@@ -45,7 +45,7 @@ def render_markers(
     ok &= pts[:, 1] - radius < h
     pts, radius = pts[ok], radius[ok]
 
-    coverage = np.zeros(h * w)
+    coverage: np.ndarray = np.zeros(h * w)
     if len(pts):
         half = np.ceil(radius + 1.0).astype(np.int64)
         flat_idx, flat_cov = [], []
@@ -68,7 +68,7 @@ def render_markers(
         coverage = np.bincount(np.concatenate(flat_idx), weights=np.concatenate(flat_cov),
                                minlength=h * w)
         np.minimum(coverage, 1.0, out=coverage)
-    img = (background + (intensity - background) * coverage).reshape(h, w).astype(np.float32)
+    img: np.ndarray = (background + (intensity - background) * coverage).reshape(h, w).astype(np.float32)
     if (blur_sigma and blur_sigma > 0) or (noise_std and noise_std > 0):
         import cv2
 
@@ -80,6 +80,8 @@ def render_markers(
             rng = rng if rng is not None else np.random.default_rng()
             cv2.setRNGSeed(int(rng.integers(2**31 - 1)))
             noise = np.empty_like(img)
-            cv2.randn(noise, 0.0, float(noise_std))
+            # OpenCV's stubs take only arrays for mean and stddev; it takes scalars as well
+            cv2.randn(noise, 0.0, float(noise_std))  # type: ignore[call-overload]
             img += noise
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    image: np.ndarray = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    return image

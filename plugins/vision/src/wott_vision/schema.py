@@ -1,48 +1,48 @@
-"""JSON Schema pieces of the device settings the camera-based families share.
+"""The settings the camera-based families share, declared as models (``SettingsModel``).
 
 Both take a simulator (scene, frame rate, pacing) or real cameras, reconnect
-with the same backoff settings and render simulated markers through
-``wott_vision.render``; a family's schema splices these in among its own
-properties (``BACKOFF_PROPERTIES`` is not camera-specific: it lives in
-``wott_hub.plugins.settings`` and is re-exported here). Reading the settings:
-``wott_vision.settings``.
+with the same backoff settings, report a press that stays just below epsilon
+and render simulated markers through ``wott_vision.render``; a family's model
+inherits ``VisionSettings`` and adds its own fields (``fps`` among them: its
+default and bound differ per family) and nested tables (``RenderTable`` and
+its own). Every number carries its bounds; the JSON Schema the docs and
+``wott-hub plugins families`` show is derived (``settings_schema``). Reading
+the settings: ``wott_vision.settings``.
+
+Models are defined at module level: msgspec resolves their annotations there.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated
 
-from wott_hub.plugins.settings import BACKOFF_PROPERTIES
+from wott_hub.plugin_api import BackoffSettings, Meta, SettingsTable
 
-__all__ = ["BACKOFF_PROPERTIES", "RENDER_PROPERTIES", "number", "simulator_properties", "table"]
-
-
-def number(default: float, description: str, **extra: Any) -> dict[str, Any]:
-    return {"type": "number", "default": default, "description": description, **extra}
+__all__ = ["FPS_DESCRIPTION", "RenderTable", "VisionSettings"]
 
 
-def table(description: str, properties: dict[str, Any]) -> dict[str, Any]:
-    """A nested settings table (``[device.render]``...): closed to unknown keys, empty by default.
+class VisionSettings(BackoffSettings):
+    """Settings every camera-based family has: name, simulator, pacing, health, reconnects."""
 
-    ``wott_vision.settings.defaults`` fills in its properties' defaults.
-    """
-    return {"type": "object", "description": description, "default": {}, "additionalProperties": False,
-            "properties": properties}
-
-
-def simulator_properties(fps: float, **fps_limits: Any) -> dict[str, Any]:
-    """``scene``, ``fps`` (default ``fps``) and ``realtime``: what a simulated source plays, and how fast."""
-    return {
-        "scene": {"type": "string", "default": "",
-                  "description": "Scene TOML the simulator plays; empty: the bundled demo scene."},
-        "fps": number(fps, "Simulator frame rate, frames/s.", exclusiveMinimum=0, **fps_limits),
-        "realtime": {"type": "boolean", "default": True,
-                     "description": "Simulator paces frames like a camera (false: as fast as read)."},
-    }
+    title: Annotated[str, Meta(description="Human-readable name; default the device id.")] | None = None
+    scene: Annotated[str, Meta(description=(
+        "Scene TOML the simulator plays; empty: the bundled demo scene."))] = ""
+    realtime: Annotated[bool, Meta(description=(
+        "Simulator and recorded files (video, image sequence) play at their frame rate like a camera "
+        "(false: as fast as read, frames still stamped with their scene or recorded time)."))] = True
+    below_threshold_s: Annotated[float, Meta(ge=0, le=3600, description=(
+        "Report 'below threshold' in the health after a press stays between 0.75 and 1 x epsilon "
+        "this long, s; 0: never."))] = 1.0
 
 
-RENDER_PROPERTIES: dict[str, Any] = {  # the simulator's image chain (wott_vision.render)
-    "blur_sigma": number(1.0, "Gaussian lens blur, px.", minimum=0),
-    "noise_std": number(2.0, "Sensor noise, grey levels.", minimum=0),
-    "seed": {"type": "integer", "default": 0, "description": "Noise seed."},
-}
+FPS_DESCRIPTION = ("Simulator frame rate, frames/s; for an image sequence its recorded rate; for a video "
+                   "file, given: overrides the container's timestamps.")
+"""The description of each family's ``fps`` field."""
+
+
+class RenderTable(SettingsTable, frozen=True):
+    """The simulator's image chain (``[device.render]``, source = "sim" only; wott_vision.render)."""
+
+    blur_sigma: Annotated[float, Meta(ge=0, le=100, description="Gaussian lens blur, px.")] = 1.0
+    noise_std: Annotated[float, Meta(ge=0, le=255, description="Sensor noise, grey levels.")] = 2.0
+    seed: Annotated[int, Meta(description="Noise seed.")] = 0

@@ -1,59 +1,68 @@
-"""Reading the device settings the camera-based families share (their schema: ``wott_vision.schema``).
+"""Reading the device settings the camera-based families share (their models: ``wott_vision.schema``).
 
 The barrel skin and the flat pad both take a simulator or real cameras, pace
 reconnects the same way and nest sub-tables (``render``, ...) with their own
-defaults; reading those is the same code for both. ``defaults`` and ``backoff``
-are not camera-specific: they live in ``wott_hub.plugins.settings`` and are
-re-exported here. Errors are ``DriverError``s naming the setting at fault (the
-plugin hook adds the device and family).
+defaults; reading those is the same code for both. A family reads its settings
+with ``read_settings(ItsModel, settings)`` (every bound checked, defaults filled
+in) and hands the typed result to these helpers. ``backoff`` is not
+camera-specific: it lives in ``wott_hub.plugin_api`` and is re-exported here.
+Errors are ``DriverError``s naming the setting at fault (the plugin hook adds
+the device and family).
 Nothing here imports cv2: the reader a family makes is opened by its driver.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from wott_hub.drivers.base import DriverError
-from wott_hub.plugins.settings import backoff, defaults
-from wott_hub.sim.scene import Scene, SceneError
-from wott_hub.tactile import MATERIALS
+from wott_hub.plugin_api import MATERIALS, DriverError, Scene, SceneError, backoff, model_fields
 
 from .driver import FrameReader
 from .simulated import SimulatedSource, Simulator
 
-__all__ = ["backoff", "check_material", "defaults", "section", "simulator_source"]
+__all__ = ["backoff", "check_material", "recorded_rate", "section", "simulator_source"]
+
+_T = TypeVar("_T")
 
 
-def section(factory: Callable[..., Any], schema: dict[str, Any], given: dict[str, Any] | None, key: str):
-    """``factory(**table)`` for the sub-table ``key`` with its defaults; errors name ``key``."""
-    table = defaults(schema, given, f"{key}.")
+def recorded_rate(given: Mapping[str, Any], s: Any, source: Any) -> tuple[float | None, bool]:
+    """(fps, realtime) for a camera source: an image sequence plays at ``fps`` (given or default),
+    a video file at its container's timestamps unless ``fps`` is given (wott_vision.camera).
+    ``given`` is the settings as written, ``s`` the family's read model."""
+    sequence = isinstance(source, str) and "%" in source
+    fps = float(s.fps) if sequence or "fps" in given else None
+    return fps, bool(s.realtime)
+
+
+def section(factory: Callable[..., _T], table: Any, key: str) -> _T:
+    """``factory(**table)`` for the read sub-table ``key``; errors name ``key``."""
     try:
-        return factory(**table)
+        return factory(**model_fields(table))
     except (TypeError, ValueError) as e:
         raise DriverError(f"{key}: {e}") from None
 
 
-def check_material(s: dict[str, Any]) -> None:
-    if s["material"] not in MATERIALS:
-        raise DriverError(f"material: {s['material']!r} is not one of {', '.join(sorted(MATERIALS))}")
+def check_material(s: Any) -> None:
+    if s.material not in MATERIALS:
+        raise DriverError(f"material: {s.material!r} is not one of {', '.join(sorted(MATERIALS))}")
 
 
 def simulator_source(
-    s: dict[str, Any], demo_scene: Path, make_simulator: Callable[[Scene], Simulator],
+    s: Any, demo_scene: Path, make_simulator: Callable[[Scene], Simulator],
 ) -> tuple[Callable[[], FrameReader], str]:
     """(``open_source``, its name) for ``source = "sim"``: ``make_simulator(scene)`` read like
-    a camera at the ``fps`` setting (``SimulatedSource``).
+    a camera at the ``fps`` setting (``SimulatedSource``) of ``s``, a family's read ``VisionSettings``.
 
     The scene is loaded now, so a bad one is refused when the device opens; each (re)open
     starts a fresh simulator from the scene's beginning.
     """
     try:
-        scene = Scene.load(s["scene"] or demo_scene)
+        scene = Scene.load(s.scene or demo_scene)
     except SceneError as e:
         raise DriverError(f"scene: {e}") from None
-    fps, realtime = float(s["fps"]), bool(s["realtime"])
+    fps, realtime = float(s.fps), bool(s.realtime)
     if not fps > 0:
         raise DriverError(f"fps: must be positive, got {fps}")
 

@@ -11,7 +11,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from wott_hub.sim.scene import Scene
+from wott_hub.plugin_api import Scene
 
 __all__ = ["SimulatedSource", "Simulator"]
 

@@ -11,24 +11,31 @@ whatever it had.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
+from contextlib import AbstractContextManager
+from typing import Any, ParamSpec, TypeVar
 
 __all__ = ["single_threaded"]
 
-_controller = None
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+_controller: Any = None  # a threadpoolctl.ThreadpoolController (threadpoolctl ships no types)
 
 
-def _limit():
+def _limit() -> AbstractContextManager[object]:
     global _controller
     if _controller is None:  # created on first use, once NumPy's and SciPy's BLAS are loaded
         from threadpoolctl import ThreadpoolController
 
         _controller = ThreadpoolController()
-    return _controller.limit(limits=1, user_api="blas")
+    limiter: AbstractContextManager[object] = _controller.limit(limits=1, user_api="blas")
+    return limiter
 
 
-def single_threaded(fn):
+def single_threaded(fn: Callable[_P, _R]) -> Callable[_P, _R]:
     @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
+    def wrapper(*args: _P.args, **kwargs: _P.kwargs) -> _R:
         with _limit():
             return fn(*args, **kwargs)
 

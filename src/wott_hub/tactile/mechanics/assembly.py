@@ -123,7 +123,8 @@ def foundation_blocks(mesh: SkinMesh, normal_per_area: float, tangent_per_area: 
     a = mesh.node_areas
     nn = n[:, :, None] * n[:, None, :]
     eye = np.broadcast_to(np.eye(3), (len(a), 3, 3))
-    return a[:, None, None] * (normal_per_area * nn + tangent_per_area * (eye - nn))
+    blocks: np.ndarray = a[:, None, None] * (normal_per_area * nn + tangent_per_area * (eye - nn))
+    return blocks
 
 
 def assemble_blocks(

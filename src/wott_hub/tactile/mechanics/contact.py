@@ -67,9 +67,10 @@ class ContactSolver:
     interpolates (slot −1: a node that does not move).
     """
 
-    def __init__(self, a, probe_slots: np.ndarray, probe_weights: np.ndarray, *,
+    def __init__(self, a: np.ndarray | sp.spmatrix, probe_slots: np.ndarray, probe_weights: np.ndarray, *,
                  stiffness_diag: np.ndarray | None = None, cache_bytes: float = 128e6) -> None:
         self.diagonal = not sp.issparse(a)
+        self.d: np.ndarray
         if self.diagonal:
             self.d = np.asarray(a, dtype=float)
             self.n = len(self.d)
@@ -89,7 +90,8 @@ class ContactSolver:
 
     def solve(self, r: np.ndarray) -> np.ndarray:
         r = np.asarray(r, dtype=float)
-        return r / self.d if self.diagonal else self.lu.solve(r)
+        x: np.ndarray = r / self.d if self.diagonal else self.lu.solve(r)
+        return x
 
     # -- cached columns ----------------------------------------------------------------
     @single_threaded
@@ -145,7 +147,7 @@ class ContactSolver:
                 start = np.flatnonzero(self._gaps(x0, g, g.press.depth_mm) < 0)
             active.append(start)
         _claim_unique(lg, active, len(self.probe_slots))
-        seen: set[tuple] = set()
+        seen: set[tuple[tuple[int, ...], ...]] = set()
         monotone = False
         j_now = self._objective(x, q, r, lg, depths, k_pen)
         for it in range(1, MAX_ITERATIONS + 1):
@@ -166,7 +168,7 @@ class ContactSolver:
             x, q = x + step * (xn - x), q + step * (qn - q)
             depths = [d + step * (e - d) for d, e in zip(depths, dn, strict=True)]
             j_now = self._objective(x, q, r, lg, depths, k_pen)
-            new_active = []
+            new_active: list[np.ndarray] = []
             claimed = np.zeros(len(self.probe_slots), dtype=bool)
             for k, g in enumerate(lg):
                 pen = np.flatnonzero(self._gaps(x, g, depths[k]) < 0)
@@ -194,9 +196,11 @@ class ContactSolver:
         w = self.probe_weights[g.probes]
         inv = np.vstack([(1.0 / self.k_diag).reshape(-1, 3), np.zeros((1, 3))])[slots]  # (k, 3 nodes, 3)
         f = np.einsum("pj,pjc,c->p", w**2, inv, g.press.axis**2)
-        return np.maximum(f, 1e-300)
+        flex: np.ndarray = np.maximum(f, 1e-300)
+        return flex
 
-    def _objective(self, x, q, r, geoms, depths, k_pen) -> float:
+    def _objective(self, x: np.ndarray, q: np.ndarray, r: np.ndarray, geoms: list[PressGeometry],
+                   depths: list[float], k_pen: list[np.ndarray]) -> float:
         """½xᵀAx − rᵀx + Σ ½k max(0, penetration)² − Σ F d: what the contact solution minimises."""
         j = 0.5 * float(x @ q) - 0.5 * float(r @ x)
         for g, d, k in zip(geoms, depths, k_pen, strict=True):
@@ -212,12 +216,17 @@ class ContactSolver:
         """a·u(p) − (d − φ_p) for every candidate probe: negative means penetration."""
         xn = np.vstack([x.reshape(-1, 3), np.zeros((1, 3))])  # slot −1 reads the zero row
         up = np.einsum("pk,pkc->pc", self.probe_weights[g.probes], xn[self.probe_slots[g.probes]])
-        return up @ g.press.axis - (depth - g.phi)
+        gaps: np.ndarray = up @ g.press.axis - (depth - g.phi)
+        return gaps
 
-    def _assemble(self, x, nodal, geoms, live_index, rows, lam, per_press, iterations,
-                  converged) -> ContactResult:
+    def _assemble(self, x: np.ndarray, nodal: np.ndarray, geoms: list[PressGeometry],
+                  live_index: dict[int, int], rows: _Rows, lam: np.ndarray,
+                  per_press: dict[int, tuple[float, np.ndarray]], iterations: int,
+                  converged: bool) -> ContactResult:
         """``nodal``: Bᵀλ, the contact forces on every dof (the last Newton step has it)."""
-        forces, depths, active = [], [], []
+        forces: list[np.ndarray] = []
+        depths: list[float] = []
+        active: list[np.ndarray] = []
         for k, g in enumerate(geoms):
             if k not in live_index:
                 forces.append(np.zeros(3))
@@ -233,7 +242,9 @@ class ContactSolver:
                              iterations, converged)
 
     # -- one equality-constrained solve ---------------------------------------------------
-    def _equality_solve(self, r, x0, geoms, active):
+    def _equality_solve(
+        self, r: np.ndarray, x0: np.ndarray, geoms: list[PressGeometry], active: list[np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray, list[float], _Rows]:
         rows = _Rows.build(geoms, active, self.probe_slots, self.probe_weights)
         m = rows.count
         force_presses = [k for k, g in enumerate(geoms) if g.press.force_n is not None]
@@ -259,7 +270,8 @@ class ContactSolver:
             depths[k] = float(d[j])
         return x, lam, depths, rows
 
-    def _schur(self, x0, dofs, bd, g0, e, f_target):
+    def _schur(self, x0: np.ndarray, dofs: np.ndarray, bd: np.ndarray, g0: np.ndarray, e: np.ndarray,
+               f_target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """B restricted to the touched dofs is the small dense ``bd`` (m x len(dofs))."""
         if self.diagonal:
             z_touched = bd.T / self.d[dofs][:, None]  # A⁻¹Bᵀ is zero off the touched dofs
@@ -287,14 +299,15 @@ class ContactSolver:
             x = x0 + cols @ (bd.T @ lam)
         return x, lam, d
 
-    def _kkt(self, r, b, g0, e, f_target):
+    def _kkt(self, r: np.ndarray, b: sp.csr_matrix, g0: np.ndarray, e: np.ndarray,
+             f_target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n, m = self.n, b.shape[0]
         # the diagonal of BA⁻¹Bᵀ, estimated from A's diagonal, scales the regularisation
         flex = np.asarray(b.multiply(b) @ (1.0 / self.k_diag)).ravel()
         es = sp.csr_matrix(e)
         kkt = sp.bmat([[self.a, -b.T, None], [b, sp.diags(REGULARISATION * flex), -es], [None, es.T, None]],
                       format="csc")
-        sol = splu(kkt).solve(np.concatenate([r, g0, f_target]))
+        sol: np.ndarray = splu(kkt).solve(np.concatenate([r, g0, f_target]))
         return sol[:n], sol[n : n + m], sol[n + m :]
 
 
@@ -352,8 +365,13 @@ class _Rows:
                    np.zeros(0, bool))
 
     @classmethod
-    def build(cls, geoms: list[PressGeometry], active: list[np.ndarray], probe_slots, probe_weights) -> _Rows:
-        probe, direction, target, press, normal = [], [], [], [], []
+    def build(cls, geoms: list[PressGeometry], active: list[np.ndarray], probe_slots: np.ndarray,
+              probe_weights: np.ndarray) -> _Rows:
+        probe: list[np.ndarray] = []
+        direction: list[np.ndarray] = []
+        target: list[np.ndarray] = []
+        press: list[np.ndarray] = []
+        normal: list[np.ndarray] = []
         for k, (g, act) in enumerate(zip(geoms, active, strict=True)):
             if act.size == 0:
                 continue

@@ -13,6 +13,8 @@ the ε threshold and a wrong modulus do to it.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..mesh import SkinMesh
@@ -52,7 +54,7 @@ class StiffnessForceModel:
     product (K d), shared by all the frame's patches.
     """
 
-    def __init__(self, mesh: SkinMesh, modulus_mpa: float, thickness_mm: float, **params) -> None:
+    def __init__(self, mesh: SkinMesh, modulus_mpa: float, thickness_mm: float, **params: Any) -> None:
         self.model = SkinModel(mesh, SkinParams(modulus_mpa=modulus_mpa, thickness_mm=thickness_mm, **params))
         self._k = self.model.K_full
         self._last: np.ndarray | None = None
@@ -65,13 +67,15 @@ class StiffnessForceModel:
         return self
 
     def node_forces(self, displacement: np.ndarray) -> np.ndarray:
-        if displacement is not self._last:  # one product per frame, however many patches
-            self._last_f = np.asarray(self._k @ displacement.ravel()).reshape(-1, 3)
-            self._last = displacement
-        return self._last_f
+        f = self._last_f
+        if f is None or displacement is not self._last:  # one product per frame, however many patches
+            f = np.asarray(self._k @ displacement.ravel()).reshape(-1, 3)
+            self._last_f, self._last = f, displacement
+        return f
 
     def force(self, nodes: np.ndarray, displacement: np.ndarray) -> np.ndarray:
-        return self.node_forces(displacement)[nodes].sum(axis=0)
+        force: np.ndarray = self.node_forces(displacement)[nodes].sum(axis=0)
+        return force
 
 
 class DynamicForceEstimator:

@@ -23,8 +23,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from ..indentation import nearest_node
+from ..mesh import SkinMesh
 from .model import ContactError, MechanicsError, SkinModel
 
 __all__ = ["FlatPunch", "Press", "PressGeometry", "Sphere", "press_geometry", "press_on"]
@@ -110,16 +112,16 @@ class Press:
 
 
 def press_on(
-    model_or_mesh,
-    point,
+    model_or_mesh: SkinModel | SkinMesh,
+    point: npt.ArrayLike,
     shape: Sphere | FlatPunch,
     *,
     depth_mm: float | None = None,
     force_n: float | None = None,
-    shear_mm=None,
+    shear_mm: npt.ArrayLike | None = None,
 ) -> Press:
     """A press at the skin point nearest ``point``, along the inward normal there."""
-    mesh = getattr(model_or_mesh, "mesh", model_or_mesh)
+    mesh = model_or_mesh.mesh if isinstance(model_or_mesh, SkinModel) else model_or_mesh
     p = np.asarray(point, dtype=float)
     if p.shape != (3,) or not np.isfinite(p).all():
         raise MechanicsError(f"press point must be a finite [x, y, z], got {point!r}")
@@ -128,7 +130,8 @@ def press_on(
     if not np.linalg.norm(n) > 0.5:
         raise MechanicsError(f"node {k} nearest to {p.tolist()} has no surface normal (it is in no cell)")
     on_plane = p - ((p - mesh.nodes[k]) @ n) * n
-    return Press(shape, on_plane, -n, depth_mm=depth_mm, force_n=force_n, shear_mm=shear_mm)
+    shear = None if shear_mm is None else np.asarray(shear_mm)  # Press checks its shape and values
+    return Press(shape, on_plane, -n, depth_mm=depth_mm, force_n=force_n, shear_mm=shear)
 
 
 @dataclass(frozen=True, slots=True, eq=False)

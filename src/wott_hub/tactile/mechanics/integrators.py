@@ -32,6 +32,7 @@ from abc import ABC, abstractmethod
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -84,7 +85,7 @@ class Integrator(ABC):
 
     def __init__(self, model: SkinModel) -> None:
         self.model = model
-        self._geom_cache: OrderedDict[tuple, PressGeometry] = OrderedDict()
+        self._geom_cache: OrderedDict[tuple[object, bytes, bytes], PressGeometry] = OrderedDict()
 
     @abstractmethod
     def step(
@@ -120,7 +121,7 @@ class Integrator(ABC):
 
     def geometries(self, presses: list[Press]) -> list[PressGeometry]:
         """Resolve presses against the model, reusing the geometry of a press that did not move."""
-        out = []
+        out: list[PressGeometry] = []
         for p in presses:
             key = (p.shape, p.point.tobytes(), p.axis.tobytes())
             g = self._geom_cache.get(key)
@@ -173,7 +174,8 @@ class _ImplicitBase(Integrator):
             self._solvers.move_to_end(key)
         return s
 
-    def _contact_solve(self, h, rhs, t1, presses, state) -> tuple[ContactResult, list[PressGeometry]]:
+    def _contact_solve(self, h: float, rhs: np.ndarray, t1: float, presses: PressSchedule,
+                       state: State) -> tuple[ContactResult, list[PressGeometry]]:
         geoms = self.geometries(self._presses(presses, t1))
         res = self.solver(h).solve_contact(rhs, geoms, warm=state.active or None)
         self._after_contact(geoms, res)
@@ -184,7 +186,9 @@ class BackwardEuler(_ImplicitBase):
     name = "backward-euler"
     order = 1
 
-    def step(self, state, h, presses=(), nodal_force=None):
+    def step(
+        self, state: State, h: float, presses: PressSchedule = (), nodal_force: ForceSchedule = None
+    ) -> State:
         h = self._check_h(h)
         m = self.model
         t1 = state.t + h
@@ -199,7 +203,9 @@ class Trapezoidal(_ImplicitBase):
     order = 2
     c1, c2 = 2.0, 4.0
 
-    def step(self, state, h, presses=(), nodal_force=None):
+    def step(
+        self, state: State, h: float, presses: PressSchedule = (), nodal_force: ForceSchedule = None
+    ) -> State:
         h = self._check_h(h)
         m = self.model
         t1 = state.t + h
@@ -230,7 +236,7 @@ class QuasiStatic(_ImplicitBase):
             self._solvers[0.0] = s
         return s
 
-    def solve(self, presses: Sequence[Press] = (), nodal_force=None, *, t: float = 0.0,
+    def solve(self, presses: PressSchedule = (), nodal_force: ForceSchedule = None, *, t: float = 0.0,
               warm: State | None = None) -> State:
         rhs = self._force(nodal_force, t)
         geoms = self.geometries(self._presses(presses, t))
@@ -239,7 +245,9 @@ class QuasiStatic(_ImplicitBase):
         z = np.zeros(self.model.ndof)
         return State(t, res.x, z, res.nodal, res.forces, res.depths, res.active)
 
-    def step(self, state, h, presses=(), nodal_force=None):
+    def step(
+        self, state: State, h: float, presses: PressSchedule = (), nodal_force: ForceSchedule = None
+    ) -> State:
         h = self._check_h(h)
         s = self.solve(presses, nodal_force, t=state.t + h, warm=state)
         return State(s.t, s.u, (s.u - state.u) / h, s.f_contact, s.forces, s.depths, s.active)
@@ -284,7 +292,9 @@ class SymplecticEuler(Integrator):
         return n
 
     @single_threaded
-    def step(self, state, h, presses=(), nodal_force=None):
+    def step(
+        self, state: State, h: float, presses: PressSchedule = (), nodal_force: ForceSchedule = None
+    ) -> State:
         n = self.substeps(h)
         dt = h / n
         m = self.model
@@ -296,8 +306,9 @@ class SymplecticEuler(Integrator):
         geoms = self.geometries(self._presses(presses, state.t + h)) if static_presses else None
         static_force = nodal_force is None or not callable(nodal_force)
         f_ext = self._force(nodal_force, state.t) if static_force else None
-        projector = None
-        res, press_acc = None, []
+        projector: ContactSolver | None = None
+        res: ContactResult | None = None
+        press_acc: list[np.ndarray] = []
         t = state.t
         with np.errstate(over="ignore", invalid="ignore"):  # divergence is reported below
             for _ in range(n):
@@ -335,7 +346,7 @@ INTEGRATORS: dict[str, type[Integrator]] = {
 }
 
 
-def make_integrator(name: str, model: SkinModel, **options) -> Integrator:
+def make_integrator(name: str, model: SkinModel, **options: Any) -> Integrator:
     try:
         cls = INTEGRATORS[name]
     except KeyError:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -100,7 +101,7 @@ class SkinParams:
         return self.shear_layer * self.shear_modulus_mpa * self.thickness_mm / 3.0 + self.pretension_n_per_mm
 
 
-def factorize(a: sp.spmatrix):
+def factorize(a: sp.spmatrix) -> Any:  # a scipy SuperLU (SciPy ships no types)
     """Sparse LU of a symmetric positive definite matrix (symmetric ordering, no pivoting needed)."""
     a = sp.csc_matrix(a)
     try:
@@ -158,7 +159,8 @@ class SkinModel:
         self._dofs = dofs
 
     @classmethod
-    def from_material(cls, mesh: SkinMesh, material: Material, thickness_mm: float, **options) -> SkinModel:
+    def from_material(cls, mesh: SkinMesh, material: Material, thickness_mm: float,
+                      **options: Any) -> SkinModel:
         """A model whose modulus, density and damping come from a material (options override)."""
         params = SkinParams(
             modulus_mpa=material.modulus_mpa,
@@ -184,11 +186,13 @@ class SkinModel:
     @cached_property
     def rest(self) -> np.ndarray:
         """(n, 3) rest positions of the moving nodes."""
-        return self.mesh.nodes[self.nodes]
+        rest: np.ndarray = self.mesh.nodes[self.nodes]
+        return rest
 
     @cached_property
     def normals(self) -> np.ndarray:
-        return self.mesh.normals[self.nodes]
+        normals: np.ndarray = self.mesh.normals[self.nodes]
+        return normals
 
     @cached_property
     def probes(self) -> ProbeSet:
@@ -197,10 +201,11 @@ class SkinModel:
     @cached_property
     def probe_slots(self) -> np.ndarray:
         """(P, 3) model slots of each probe's nodes, -1 for a node that cannot move."""
-        return self.slot[self.probes.nodes]
+        slots: np.ndarray = self.slot[self.probes.nodes]
+        return slots
 
     @cached_property
-    def probe_tree(self):
+    def probe_tree(self) -> Any:  # a scipy.spatial.cKDTree (SciPy ships no types)
         from scipy.spatial import cKDTree
 
         return cKDTree(self.probes.rest)
@@ -215,7 +220,7 @@ class SkinModel:
     @cached_property
     def probe_moves(self) -> np.ndarray:
         """(P,) whether a probe has any weight on a moving node (an indenter can push it)."""
-        return ((self.probe_slots >= 0) & (self.probes.weights > 0)).any(axis=1)
+        return np.asarray(((self.probe_slots >= 0) & (self.probes.weights > 0)).any(axis=1))
 
     def to_nodes(self, x: np.ndarray) -> np.ndarray:
         """(N, 3) displacement of every mesh node from a dof vector (fixed nodes at zero)."""
@@ -227,7 +232,8 @@ class SkinModel:
         d = np.asarray(d, dtype=float)
         if d.shape != (self.mesh.n_nodes, 3):
             raise MechanicsError(f"expected an ({self.mesh.n_nodes}, 3) displacement, got {d.shape}")
-        return d[self.nodes].ravel().copy()
+        dofs: np.ndarray = d[self.nodes].ravel().copy()
+        return dofs
 
     # -- energy and stability ----------------------------------------------------------------
     def energy(self, u: np.ndarray, v: np.ndarray) -> float:

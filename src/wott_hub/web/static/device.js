@@ -1,15 +1,20 @@
 // The device page: the skin as a 3D mesh from its TD, deformed live by skinDeformedDetection.
 //
-// Events arrive at up to the device's frame rate (120 Hz and more); the page draws at the
-// display's rate. Since every packet is the complete deformed set, only the newest one
-// matters: each SSE message just replaces ``pending`` and one requestAnimationFrame loop
-// draws it when the previous draw is done. Nothing queues up, whatever the event rate.
+// Events arrive at up to the device's frame rate (120 Hz and more); the page draws at most once
+// per display frame. Every packet is the complete deformed set, so only the newest one matters:
+// a message replaces ``pending`` and is drawn at once if nothing was drawn in this display frame
+// yet, else by the next requestAnimationFrame, together with any packet after it (coalesced,
+// never lost: the counters in ``window.__twinStats`` account for every packet). A draw moves
+// only the nodes the packet changed (render3d.js), so it costs a few ms and messages never wait
+// behind it (plotly's whole-mesh restyle took 200-270 ms; issue 18).
 
 import {Skin} from "./skin.js";
+import {COLOUR_STOPS, SkinView} from "./render3d.js";
 import {ReplayControl} from "./replay.js";
 import {discover, getJSON, hubKeyOf, now, observeProperty, readProperty, subscribeEvents} from "./wot.js";
 
-const WINDOW = 120; // delay samples kept for the median and p95
+const WINDOW = 120; // delay samples kept for the panel's median and p95
+const LOG = 100000; // delay samples kept for the benchmark (window.__twinStats)
 
 const state = (window.twin = {
   page: "device", ready: false, thing: null, title: null, mode: "live", nodes: 0, cells: 0,
@@ -21,10 +26,27 @@ const state = (window.twin = {
 const $ = (id) => document.getElementById(id);
 const plot = $("skin");
 let view = null; // the Thing shown: {td, skin, streams, contactStream}
+let view3d = null; // its SkinView
 let pending = null; // newest packet not drawn yet
 let pendingContacts = null;
-let busy = false;
+let drewInFrame = false; // a draw already happened in this display frame
 let scale = 1;
+
+// What the benchmark (wott-hub bench twin) and the tests read: every delay sample since reset(),
+// and the packet accounting: packets = coalesced (drawn, or replaced by a newer packet that was
+// drawn) + waiting (received since the last draw) + dropped (pending when the page left a view).
+const log = {hubToPage: [], pageToScreen: [], endToEnd: [], drawMs: [], packets: 0, draws: 0, coalesced: 0,
+  waiting: 0, dropped: 0, uploaded: 0};
+window.__twinStats = {
+  reset() {
+    for (const k of ["hubToPage", "pageToScreen", "endToEnd", "drawMs"]) log[k] = [];
+    log.packets = log.draws = log.coalesced = log.uploaded = 0;
+    log.waiting = log.dropped = 0;
+  },
+  snapshot() {
+    return {thing: state.thing, mode: state.mode, ...log};
+  },
+};
 
 function showError(e) {
   const msg = String(e && e.message ? e.message : e);
@@ -56,15 +78,15 @@ async function show(tdUrl, {after = null, mode = "live"} = {}) {
   $("mode").className = `badge state-${mode}`;
   $("mesh").textContent = `${skin.n} nodes, ${skin.cells} cells`;
   document.title = `wott-hub · ${td.title}`;
-  skin.apply({arrayOfDeformedNodes: []}, scale);
-  await drawMesh(skin);
+  drawMesh(skin);
   const v = (view = {td, skin, streams: [], contactStream: null, url: tdUrl});
   if (contacts) setContacts(contacts);
-  v.streams = subscribeEvents(td, ["skinDeformedDetection", "actionDetection"], (name, data, id) => {
+  // every event the TD declares (actionDetails too), though only two are drawn
+  v.streams = subscribeEvents(td, Object.keys(td.events || {}), (name, data, id) => {
     state.seqs.push(Number(id)); // every event id of the stream, to check resumes lose nothing
     if (state.seqs.length > 50000) state.seqs.splice(0, 25000);
     if (name === "skinDeformedDetection") onPacket(data, id);
-    else onAction(data);
+    else if (name === "actionDetection") onAction(data);
   }, {after, onState: streamState});
   v.contactStream = observeProperty(td, "contactInformation", (value) => {
     pendingContacts = value;
@@ -82,6 +104,8 @@ function detach() {
   view.streams = [];
   view.contactStream = null;
   pending = pendingContacts = null;
+  log.dropped += log.waiting; // packets of a view left before they were drawn
+  log.waiting = 0;
 }
 
 function close() {
@@ -89,39 +113,28 @@ function close() {
   view = null;
 }
 
-async function drawMesh(skin) {
-  const mesh = {
-    type: "mesh3d", x: Array.from(skin.x), y: Array.from(skin.y), z: Array.from(skin.z),
-    i: Array.from(skin.i), j: Array.from(skin.j), k: Array.from(skin.k),
-    intensity: Array.from(skin.intensity), intensitymode: "vertex", cmin: 0, cmax: state.cmax,
-    colorscale: [[0, "#dfe7ee"], [0.15, "#9ecae1"], [0.4, "#fdd049"], [0.7, "#f46d43"], [1, "#a50026"]],
-    colorbar: {title: {text: "‖D‖ mm"}, thickness: 12, len: 0.6},
-    lighting: {ambient: 0.75, diffuse: 0.45, specular: 0.1, roughness: 0.7, fresnel: 0.1},
-    hovertemplate: "node %{customdata}<br>%{intensity:.3f} mm<extra></extra>",
-    customdata: Array.from({length: skin.n}, (_, k) => k), name: "skin",
-  };
-  const contacts = {
-    type: "scatter3d", mode: "markers", x: [], y: [], z: [], text: [], name: "contacts",
-    marker: {size: 7, color: "#111", symbol: "diamond"}, hovertemplate: "contact<br>%{text}<extra></extra>",
-  };
-  const ranges = skin.ranges();
-  const span = Math.max(...ranges.map(([a, b]) => b - a));
-  const axis = (t, r) => ({title: {text: t}, range: r, autorange: false, showbackground: false,
-    gridcolor: "#e3e7eb", zeroline: false});
-  const layout = {
-    margin: {l: 0, r: 0, t: 0, b: 0}, showlegend: false, paper_bgcolor: "#fff", uirevision: "keep",
-    scene: {
-      xaxis: axis("x mm", ranges[0]), yaxis: axis("y mm", ranges[1]), zaxis: axis("z mm", ranges[2]),
-      aspectmode: "manual", // true proportions (fixed ranges, so "data" would not apply)
-      aspectratio: {x: (ranges[0][1] - ranges[0][0]) / span, y: (ranges[1][1] - ranges[1][0]) / span,
-        z: (ranges[2][1] - ranges[2][0]) / span},
-      camera: {eye: {x: 1.2, y: -1.2, z: 0.7}},
-    },
-  };
-  // plotly renders 3D at twice the screen's resolution by default: four times the pixels to
-  // fill at every update for nothing on a standard display
-  const plotGlPixelRatio = Math.min(2, Math.max(1, window.devicePixelRatio || 1));
-  await Plotly.react(plot, [mesh, contacts], layout, {responsive: true, displaylogo: false, plotGlPixelRatio});
+function drawMesh(skin) {
+  if (view3d) view3d.dispose();
+  view3d = new SkinView(plot, skin, {onChange: () => requestDraw()});
+  view3d.setCmax(state.cmax);
+  colourBar();
+  view3d.render();
+  // what the tests check of the mesh on screen (plotly's trace used to answer this)
+  plot.data = [{
+    type: "mesh", renderer: "three.js",
+    get x() { return view3d.pos.array.filter((_, k) => k % 3 === 0); },
+    get i() { return skin.i; },
+    get intensity() { return skin.intensity; },
+  }];
+}
+
+function colourBar() {
+  const bar = $("colourbar");
+  if (!bar) return;
+  bar.querySelector(".ramp").style.background =
+    `linear-gradient(to top, ${COLOUR_STOPS.map(([t, c]) => `${c} ${t * 100}%`).join(", ")})`;
+  $("cb-max").textContent = state.cmax.toFixed(1);
+  $("cb-mid").textContent = (state.cmax / 2).toFixed(1);
 }
 
 // --- events -------------------------------------------------------------------------------
@@ -140,6 +153,14 @@ function onPacket(packet, id) {
   }
   if (state.mode === "live") sample("net", t - stampMs);
   pending = {packet, seq: Number(id), at: t, max, stamp: stampMs};
+  log.packets++;
+  log.waiting++;
+  if (!drewInFrame) draw(); // the first packet of a display frame is drawn at once
+}
+
+// A contact, a camera move or a resize: redrawn by the next animation frame.
+function requestDraw() {
+  if (view3d) view3d.needsRender = true;
 }
 
 function onAction(action) {
@@ -159,8 +180,8 @@ function setContacts(value) {
   $("contacts").textContent = state.contacts;
   const loc = value.contactLocations || [], f = value.contactForces || [];
   const text = f.map((v) => `${Math.hypot(v.x, v.y, v.z).toFixed(2)} N`);
-  Plotly.restyle(plot, {x: [loc.map((p) => p.x)], y: [loc.map((p) => p.y)], z: [loc.map((p) => p.z)], text: [text]},
-    [1]);
+  $("contacts").title = text.join(", ");
+  if (view3d) view3d.setContacts(loc);
 }
 
 function streamState(s, stream) {
@@ -172,36 +193,62 @@ function streamState(s, stream) {
   $("reconnects").textContent = state.reconnects;
 }
 
+const LOGGED = {net: "hubToPage", draw: "pageToScreen", e2e: "endToEnd"};
+
 function sample(kind, ms) {
   const a = state.delays[kind];
   a.push(ms);
   if (a.length > WINDOW) a.shift();
+  const all = log[LOGGED[kind]];
+  if (all.length < LOG) all.push(ms);
 }
 
 // --- drawing: at most one mesh update per display frame --------------------------------------
 
 function frame() {
   requestAnimationFrame(frame);
-  if (!view || busy || state.freeze) return;
-  if (pendingContacts) {
-    setContacts(pendingContacts);
-    pendingContacts = null;
+  drewInFrame = false;
+  if (!view) return;
+  if (!state.freeze) {
+    if (pendingContacts) {
+      setContacts(pendingContacts);
+      pendingContacts = null;
+    }
+    if (pending) draw();
   }
-  if (!pending) return;
+  // a camera move, a resize or contacts: also while the picture is held
+  if (!drewInFrame && view3d && view3d.needsRender) {
+    view3d.render();
+    drewInFrame = true;
+  }
+}
+
+// Apply the newest packet to the skin (the nodes it changes), upload those, render; the frame
+// that shows it is the next animation frame, where the delays are taken.
+function draw() {
+  if (!view || !view3d || state.freeze || !pending) return;
   const job = pending;
   pending = null;
-  busy = true;
+  const t0 = now();
   const skin = view.skin;
-  skin.apply(job.packet, scale);
-  if (job.max > state.cmax) state.cmax = Math.ceil(job.max * 2) / 2;
-  state.applied = {seq: job.seq, max: job.max, at: now()};
-  for (const o of state.onsets) if (o.applied === null && o.seq <= job.seq) o.applied = state.applied.at;
-  Plotly.restyle(plot, {
-    x: [Array.from(skin.x)], y: [Array.from(skin.y)], z: [Array.from(skin.z)],
-    intensity: [Array.from(skin.intensity)], cmax: [state.cmax],
-  }, [0]).then(() => requestAnimationFrame(() => {
+  skin.apply(job.packet, scale, !!job.redraw);
+  state.applied = {seq: job.seq, max: job.max, at: t0};
+  for (const o of state.onsets) if (o.applied === null && o.seq <= job.seq) o.applied = t0;
+  if (job.max > state.cmax) {
+    state.cmax = Math.ceil(job.max * 2) / 2;
+    view3d.setCmax(state.cmax);
+    colourBar();
+  }
+  view3d.update(!!job.redraw);
+  view3d.render();
+  drewInFrame = true;
+  log.draws++;
+  log.coalesced += log.waiting;
+  log.waiting = 0;
+  log.uploaded += view3d.uploaded || 0;
+  if (log.drawMs.length < LOG) log.drawMs.push(now() - t0);
+  requestAnimationFrame(() => {
     const t = now();
-    busy = false;
     state.frames++;
     state.drawn = {seq: job.seq, max: job.max, at: t};
     if (!job.redraw) {
@@ -209,11 +256,8 @@ function frame() {
       if (state.mode === "live") sample("e2e", t - job.stamp);
     }
     for (const o of state.onsets) if (o.drawn === null && o.seq <= job.seq) o.drawn = t;
-    $("deformed").textContent = skin.intensity.reduce((n, v) => n + (v > 0), 0);
+    $("deformed").textContent = skin.nActive;
     $("peak").textContent = `${job.max.toFixed(3)} mm`;
-  }), (e) => {
-    busy = false;
-    showError(e);
   });
 }
 
@@ -242,7 +286,10 @@ function panels() {
 async function main() {
   const tdUrl = new URLSearchParams(location.search).get("td");
   if (!tdUrl) throw new Error("no Thing given: open this page from the fleet page (?td=<TD URL>)");
-  $("freeze").onchange = (e) => (state.freeze = e.target.checked);
+  $("freeze").onchange = (e) => {
+    state.freeze = e.target.checked;
+    if (!state.freeze) requestDraw();
+  };
   $("exaggerate").onchange = (e) => {
     scale = Number(e.target.value);
     if (view && state.last) pending = pending || {packet: lastPacket(), seq: state.last.seq, at: now(),

@@ -51,6 +51,8 @@ export class ReplayControl {
     } else {
       input.from = $("range").value; // "-30s": the hub reads it relative to its clock
     }
+    // the TD declares from/to as strings (a number as text is seconds, or ns above 1e14)
+    for (const k of ["from", "to"]) if (typeof input[k] === "number") input[k] = String(input[k]);
     return input;
   }
 

@@ -4,7 +4,8 @@
 // norm (mm), not its direction; the twin shows it along the inward normal (how
 // a press deforms a skin), which is exact for normal presses and an
 // approximation for shear. Nodes absent from a packet are at rest (the packet is
-// the complete deformed set; docs/processing.md).
+// the complete deformed set; docs/processing.md), so a packet moves the nodes it
+// names and returns those the previous one named to rest: nothing else changes.
 
 export class Skin {
   constructor(skinNodes, skinCells) {
@@ -42,6 +43,17 @@ export class Skin {
     this.x = new Float64Array(n);
     this.y = new Float64Array(n);
     this.z = new Float64Array(n);
+    for (let v = 0; v < n; v++) {
+      this.x[v] = this.rest[3 * v];
+      this.y[v] = this.rest[3 * v + 1];
+      this.z[v] = this.rest[3 * v + 2];
+    }
+    this.active = new Int32Array(n); // nodes deformed by the last packet: active[0 .. nActive)
+    this.nActive = 0;
+    this.changed = new Int32Array(n); // nodes the last apply() moved: changed[0 .. nChanged)
+    this.nChanged = 0;
+    this._mark = new Uint32Array(n);
+    this._epoch = 0;
     this.size = this._size();
   }
 
@@ -93,21 +105,40 @@ export class Skin {
   }
 
   // Positions and per-vertex intensity for one packet; ``scale`` exaggerates the displacement.
-  // Returns the largest intensity in the packet.
-  apply(packet, scale = 1) {
-    const I = this.intensity;
-    I.fill(0);
-    let max = 0;
+  // Returns the largest intensity in the packet. Only the nodes that change are touched: those
+  // the packet names and those the previous packet named (back to rest), or all with ``full``;
+  // their indices are ``changed[0 .. nChanged)``, for the renderer to upload just those.
+  apply(packet, scale = 1, full = false) {
+    const I = this.intensity, mark = this._mark, ch = this.changed, act = this.active;
+    const epoch = ++this._epoch;
+    let nc = 0;
+    for (let a = 0; a < this.nActive; a++) {
+      const k = act[a];
+      I[k] = 0;
+      if (mark[k] !== epoch) {
+        mark[k] = epoch;
+        ch[nc++] = k;
+      }
+    }
+    let na = 0, max = 0;
     for (const d of packet.arrayOfDeformedNodes || []) {
       const k = this.index.get(d.deformedNodeID);
       if (k === undefined) continue;
       const v = d.deformedNodeIntensity;
+      if (I[k] === 0 && v !== 0) act[na++] = k; // a node named twice is listed once
       I[k] = v;
       if (v > max) max = v;
+      if (mark[k] !== epoch) {
+        mark[k] = epoch;
+        ch[nc++] = k;
+      }
     }
+    this.nActive = na;
+    if (full) for (nc = 0; nc < this.n; nc++) ch[nc] = nc;
+    this.nChanged = nc;
     const r = this.rest, nrm = this.normals;
-    for (let v = 0; v < this.n; v++) {
-      const s = I[v] * scale;
+    for (let c = 0; c < nc; c++) {
+      const v = ch[c], s = I[v] * scale;
       this.x[v] = r[3 * v] - s * nrm[3 * v];
       this.y[v] = r[3 * v + 1] - s * nrm[3 * v + 1];
       this.z[v] = r[3 * v + 2] - s * nrm[3 * v + 2];

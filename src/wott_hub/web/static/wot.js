@@ -13,9 +13,43 @@ export class HttpError extends Error {
 
 export const now = () => performance.timeOrigin + performance.now(); // ms since the epoch, sub-ms
 
+// The hub's bearer token (docs/security.md), when it asks for one: given once in the URL
+// fragment (#access_token=...), which never reaches the server or its logs, or typed when a
+// request is refused; kept in sessionStorage (this tab only). Sent as the Authorization header
+// on fetch; EventSource and WebSocket cannot set headers, so they carry ?access_token=.
+const TOKEN_KEY = "wott-hub-token";
+{
+  const m = /(?:^#|&)access_token=([^&]+)/.exec(location.hash);
+  if (m) {
+    sessionStorage.setItem(TOKEN_KEY, decodeURIComponent(m[1]));
+    history.replaceState(null, "", location.pathname + location.search);
+  }
+}
+export const token = () => sessionStorage.getItem(TOKEN_KEY);
+export const authHeaders = (h = {}) => (token() ? {...h, Authorization: `Bearer ${token()}`} : h);
+export function withToken(url) {
+  const u = new URL(url, location.href);
+  if (token()) u.searchParams.set("access_token", token());
+  return u.href;
+}
+let asking = false;
+function refused(r) {
+  // 401: no token, or one revoked; ask once, then load the page again with it
+  if (r.status !== 401 || asking) return;
+  asking = true;
+  const t = window.prompt("This hub needs an access token (wott-hub tokens create NAME --scope read):");
+  if (t) {
+    sessionStorage.setItem(TOKEN_KEY, t.trim());
+    location.reload();
+  }
+}
+
 export async function getJSON(url, accept = "application/json") {
-  const r = await fetch(url, {headers: {Accept: accept}});
-  if (!r.ok) throw new HttpError(r.status, `${url}: ${r.status} ${await problem(r)}`);
+  const r = await fetch(url, {headers: authHeaders({Accept: accept})});
+  if (!r.ok) {
+    refused(r);
+    throw new HttpError(r.status, `${url}: ${r.status} ${await problem(r)}`);
+  }
   return r.json();
 }
 
@@ -60,7 +94,7 @@ export async function invokeAction(td, name, input) {
   if (!f) throw new Error(`${td.title}: no HTTP invokeaction form for ${name}`);
   const r = await fetch(href(td, f), {
     method: f["htv:methodName"] || "POST",
-    headers: {"Content-Type": f.contentType || "application/json", Accept: "application/json"},
+    headers: authHeaders({"Content-Type": f.contentType || "application/json", Accept: "application/json"}),
     body: JSON.stringify(input),
   });
   if (!r.ok) throw new HttpError(r.status, `${name}: ${await problem(r)}`);
@@ -103,6 +137,11 @@ class Reconnecting {
 // saw, so nothing is lost and nothing repeats. EventSource cannot set the
 // Last-Event-ID header on a fresh connection, so the id goes in ``lastEventId=``,
 // which the hub's SSE endpoints accept like the header.
+//
+// Framing (docs/hub.md): a stream of one affordance (one event, one observed
+// property) carries unnamed messages, delivered as ``names[0]``; a stream of
+// several (subscribeallevents, the directory's /events) names each message, and
+// only the ``names`` listened to are delivered.
 export class SseStream extends Reconnecting {
   constructor(url, names, onEvent, {after = null, onState = null} = {}) {
     super(onState, 100);
@@ -115,23 +154,23 @@ export class SseStream extends Reconnecting {
 
   _open() {
     if (this.closed) return;
-    const u = new URL(this.url);
+    const u = new URL(withToken(this.url));
     if (this.lastEventId !== null && this.lastEventId !== "") u.searchParams.set("lastEventId", this.lastEventId);
     const es = (this.es = new EventSource(u.href));
     es.onopen = () => this._set("open");
-    for (const name of this.names) {
-      es.addEventListener(name, (e) => {
-        if (e.lastEventId) this.lastEventId = e.lastEventId;
-        this._received();
-        let data;
-        try {
-          data = JSON.parse(e.data);
-        } catch {
-          return;
-        }
-        this.onEvent(name, data, e.lastEventId);
-      });
-    }
+    const deliver = (name) => (e) => {
+      if (e.lastEventId) this.lastEventId = e.lastEventId;
+      this._received();
+      let data;
+      try {
+        data = JSON.parse(e.data);
+      } catch {
+        return;
+      }
+      this.onEvent(name, data, e.lastEventId);
+    };
+    for (const name of this.names) es.addEventListener(name, deliver(name));
+    if (this.names.length === 1) es.onmessage = deliver(this.names[0]); // one affordance: unnamed
     es.onerror = () => {
       es.close();
       this._retry();
@@ -161,7 +200,7 @@ export class WsSubscription extends Reconnecting {
 
   _open() {
     if (this.closed) return;
-    const ws = (this.ws = new WebSocket(this.url));
+    const ws = (this.ws = new WebSocket(withToken(this.url)));
     ws.onopen = () => {
       const method = this.property ? "on_property_change" : "on_event";
       ws.send(JSON.stringify({jsonrpc: "2.0", method, params: {name: this.name}, id: 1}));
@@ -250,8 +289,9 @@ export async function listDirectory() {
   let url = new URL("/things", location.href).href;
   const out = [];
   while (url) {
-    const r = await fetch(url, {headers: {Accept: "application/ld+json, application/json"}});
+    const r = await fetch(url, {headers: authHeaders({Accept: "application/ld+json, application/json"})});
     if (r.status === 404 && out.length === 0) return null;
+    refused(r);
     if (!r.ok) throw new HttpError(r.status, `${url}: ${r.status} ${await problem(r)}`);
     const page = await r.json();
     out.push(...(Array.isArray(page) ? page : page.members || []));

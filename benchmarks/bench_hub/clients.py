@@ -1,0 +1,221 @@
+"""Client processes: SSE, hub WebSocket, wotpy and TD GET clients, each run in its own process.
+
+Clients run as separate processes (``python -m bench_hub.clients SPEC``), so the hub's event
+loop and the clients do not share a core's time slices in one process. Client and hub stamps
+are ``time.perf_counter_ns`` (CLOCK_MONOTONIC on Linux), comparable across processes.
+
+Protocol with the hub side (``Client``): the process prints ``ready`` once subscribed, then
+one JSON line with its result. Only the standard library is imported at the top: a client
+imports what it uses (httpx, tornado, wotpy) when it starts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import random
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .common import now_ns, payload
+
+__all__ = ["Client", "client_main"]
+
+_BENCHMARKS = Path(__file__).resolve().parent.parent
+
+
+def client_main(spec: dict) -> None:
+    kind = spec["kind"]
+    if kind == "sse":
+        res = asyncio.run(_sse_client(spec["urls"], spec["duration"]))
+    elif kind == "wotpy":
+        res = asyncio.run(_wotpy_client(spec["urls"], spec["duration"], spec["event"]))
+    elif kind == "ws-raw":
+        res = asyncio.run(_ws_raw_client(spec["url"], spec["event"], spec["duration"]))
+    elif kind == "ws-lat":
+        res = asyncio.run(_ws_latency_client(spec["urls"], spec["event"], spec["duration"]))
+    elif kind == "td-get":
+        res = _td_get_client(spec["urls"], spec["n"])
+    else:
+        raise SystemExit(f"unknown client {kind}")
+    print(json.dumps(res), flush=True)
+
+
+def _ready() -> None:
+    print("ready", flush=True)
+
+
+async def _measure(tasks: list[asyncio.Task], duration: float) -> None:
+    """Tell the hub side the client is subscribed, receive for ``duration``, then stop."""
+    _ready()
+    await asyncio.sleep(duration)
+    for t in tasks:
+        t.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
+
+
+async def _sse_client(urls: list[str], duration: float) -> dict:
+    import httpx
+    from httpx_sse import aconnect_sse
+
+    got: list[tuple] = []
+    connected = 0
+    all_connected = asyncio.Event()
+
+    async def one(i: int, url: str, c) -> None:
+        nonlocal connected
+        async with aconnect_sse(c, "GET", url) as es:
+            connected += 1
+            if connected == len(urls):
+                all_connected.set()
+            async for ev in es.aiter_sse():
+                t = now_ns()
+                data = json.loads(ev.data)
+                stamp = data.get("timeStamp") if isinstance(data, dict) else 0
+                got.append((i, int(ev.id), t, now_ns(), stamp))
+
+    limits = httpx.Limits(max_connections=len(urls) + 2, max_keepalive_connections=len(urls) + 2)
+    async with httpx.AsyncClient(timeout=None, limits=limits) as c:
+        tasks = [asyncio.create_task(one(i, u, c)) for i, u in enumerate(urls)]
+        await asyncio.wait_for(all_connected.wait(), 30)
+        await _measure(tasks, duration)
+    return {"events": got}
+
+
+async def _wotpy_client(urls: list[str], duration: float, event: str) -> dict:
+    from wotpy.protocols.ws.messages import WebsocketMessageEmittedItem
+    from wotpy.wot.servient import Servient
+    from wotpy.wot.wot import WoT
+
+    got: list[tuple] = []
+    wot = WoT(servient=Servient(catalogue_port=None))
+    subs = []
+    for i, url in enumerate(urls):
+        thing = await wot.consume_from_url(url)
+        subs.append(thing.events[event].subscribe(
+            on_next=lambda ev, i=i: got.append((i, ev.data["timeStamp"], now_ns()))))
+    await asyncio.sleep(0.5)  # each wotpy subscription opens its own connection
+    _ready()
+    await asyncio.sleep(duration)
+    for s in subs:
+        s.dispose()
+    # what wotpy's client spends decoding one message (parse + jsonschema), for the stage table
+    sample = json.dumps({"subscription": "x" * 36, "name": event, "data": payload(20, 1)})
+    t = now_ns()
+    for _ in range(200):
+        WebsocketMessageEmittedItem.from_raw(sample)
+    return {"events": got, "decode_ns": (now_ns() - t) / 200}
+
+
+async def _ws_raw_client(url: str, event: str, duration: float) -> dict:
+    """A minimal JSON-RPC subscriber (no wotpy client cost): counts events and checks their order."""
+    from tornado.websocket import websocket_connect
+
+    ws = await websocket_connect(url, max_message_size=1 << 26)
+    await ws.write_message(json.dumps({"jsonrpc": "2.0", "method": "on_event", "params": {"name": event},
+                                       "id": "sub"}))
+    await ws.read_message()
+    _ready()
+    n = 0
+    first = last = None
+    out_of_order = 0
+    end = time.monotonic() + duration
+    while True:
+        timeout = end - time.monotonic()
+        if timeout <= 0:
+            break
+        try:
+            msg = await asyncio.wait_for(ws.read_message(), timeout)
+        except TimeoutError:
+            break
+        if msg is None:
+            break
+        doc = json.loads(msg)
+        if "error" in doc:  # e.g. cut off for falling behind: count it as loss
+            out_of_order += 1
+            break
+        ts = doc["data"]["timeStamp"]
+        if last is not None and ts != last + 1:
+            out_of_order += 1
+        first = ts if first is None else first
+        last = ts
+        n += 1
+    ws.close()
+    return {"n": n, "first": first, "last": last, "out_of_order": out_of_order}
+
+
+async def _ws_latency_client(urls: list[str], event: str, duration: float) -> dict:
+    """Raw JSON-RPC subscriptions to several Things: arrival time of each event (no wotpy client)."""
+    from tornado.websocket import websocket_connect
+
+    got: list[tuple] = []
+
+    async def one(i: int, url: str, started: asyncio.Future) -> None:
+        ws = await websocket_connect(url, max_message_size=1 << 26)
+        await ws.write_message(json.dumps({"jsonrpc": "2.0", "method": "on_event",
+                                           "params": {"name": event}, "id": "sub"}))
+        await ws.read_message()
+        started.set_result(None)
+        while True:
+            msg = await ws.read_message()
+            if msg is None:
+                return
+            t = now_ns()
+            data = json.loads(msg).get("data")
+            if data is None:  # a subscription error (cut off for falling behind)
+                return
+            got.append((i, data["timeStamp"], t, now_ns()))
+
+    loop = asyncio.get_running_loop()
+    started = [loop.create_future() for _ in urls]
+    tasks = [asyncio.create_task(one(i, u, f)) for i, (u, f) in enumerate(zip(urls, started, strict=True))]
+    await asyncio.gather(*started)
+    await _measure(tasks, duration)
+    return {"events": got}
+
+
+def _td_get_client(urls: list[str], n: int) -> dict:
+    import httpx
+
+    rnd = random.Random(1)
+    lat = []
+    with httpx.Client(timeout=120) as c:
+        c.get(urls[0])
+        _ready()
+        for _ in range(n):
+            url = rnd.choice(urls)
+            t = now_ns()
+            r = c.get(url)
+            r.json()
+            lat.append(now_ns() - t)
+            assert r.status_code == 200
+    return {"lat_ns": lat}
+
+
+class Client:
+    """A client process: started, waited for ``ready``, then its JSON result."""
+
+    def __init__(self, spec: dict) -> None:
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(_BENCHMARKS), env.get("PYTHONPATH")) if p)
+        self.proc = subprocess.Popen([sys.executable, "-m", f"{__package__}.clients", json.dumps(spec)],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+    async def ready(self, timeout: float = 60) -> None:
+        line = await asyncio.wait_for(asyncio.to_thread(self.proc.stdout.readline), timeout)
+        if line.strip() != "ready":
+            raise RuntimeError(f"client failed: {line}{self.proc.stderr.read()}")
+
+    async def result(self, timeout: float = 120) -> dict:
+        out = await asyncio.wait_for(asyncio.to_thread(self.proc.stdout.readline), timeout)
+        self.proc.wait(30)
+        if not out:
+            raise RuntimeError(f"client failed: {self.proc.stderr.read()}")
+        return json.loads(out)
+
+
+if __name__ == "__main__":
+    client_main(json.loads(sys.argv[1]))

@@ -1,0 +1,48 @@
+"""wott-client: Tactile WoT Things in Python, the mesh and every frame as NumPy arrays.
+
+Consumes any Tactile Thing Description (a wott-hub's or another server's) by
+reading its forms; streams ``skinDeformedDetection`` packets as dense per-node
+fields, ``contactInformation`` and ``actionDetection`` as dataclasses; resumes
+each stream with ``Last-Event-ID`` after a disconnect. ``AsyncClient`` is the
+core; ``Client`` runs it on a background thread for blocking code.
+"""
+
+from ._client import AsyncClient
+from ._directory import AsyncDirectory
+from ._errors import ClientError, InvalidTD, NotFound, TransportError
+from ._frames import Action, ActionDetails, Contacts, Frame, Item, ProtocolError
+from ._history import AsyncHistory
+from ._mdns import Resolved, async_resolve
+from ._sse import Message, SSEParser
+from ._stream import ResumableStream
+from ._sync import Client, Directory, History, Thing
+from ._td import Mesh, parse_mesh
+from ._thing import AsyncThing
+
+__all__ = [
+    "Action",
+    "ActionDetails",
+    "AsyncClient",
+    "AsyncDirectory",
+    "AsyncHistory",
+    "AsyncThing",
+    "Client",
+    "ClientError",
+    "Contacts",
+    "Directory",
+    "Frame",
+    "History",
+    "InvalidTD",
+    "Item",
+    "Mesh",
+    "Message",
+    "NotFound",
+    "ProtocolError",
+    "ResumableStream",
+    "SSEParser",
+    "Thing",
+    "TransportError",
+    "Resolved",
+    "async_resolve",
+    "parse_mesh",
+]

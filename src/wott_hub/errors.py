@@ -1,0 +1,97 @@
+"""The hub's one error tree: every error the hub raises on purpose derives from ``WottHubError``.
+
+Why one root: an embedding program, the HTTP routes and the CLI each catch
+``WottHubError`` once and translate it, in one place each (``HTTP_STATUS`` /
+``http_status`` for the servient, ``EXIT_CODES`` / ``exit_code`` for the CLI),
+instead of re-mapping the same class to different meanings at every call site.
+Anything else that escapes is a bug, reported as such.
+
+Subclasses also derive from the built-in they replace (``ValueError`` for bad
+input, ``LookupError`` for a missing thing) so ``except ValueError`` written
+before the tree existed keeps working.
+
+This module imports nothing of the hub: every layer, the pure domain in
+``tactile/`` included, may import it.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "EXIT_CODES",
+    "HTTP_STATUS",
+    "ConfigError",
+    "Conflict",
+    "DriverError",
+    "HistoryError",
+    "InvalidInput",
+    "NotFound",
+    "WottHubError",
+    "exit_code",
+    "http_status",
+]
+
+
+class WottHubError(Exception):
+    """The root: an error the hub reports with a message meant for a person."""
+
+
+class InvalidInput(WottHubError, ValueError):
+    """Input that can never be right as given (a frame with NaN, a bad mesh, a bad scene step)."""
+
+
+class ConfigError(InvalidInput):
+    """A configuration file, table or key is wrong; the message names file, table and key."""
+
+
+class NotFound(WottHubError, LookupError):
+    """Something asked for by name does not exist (a device, a recorded Thing, a replay)."""
+
+
+class Conflict(WottHubError):
+    """The request clashes with the current state (an id already served, a database in use)."""
+
+
+class DriverError(WottHubError):
+    """A device cannot be opened or run at all (bad settings, model contract mismatch, no port)."""
+
+
+class HistoryError(WottHubError):
+    """The history database cannot be used (unknown URL scheme, newer schema, corrupted file)."""
+
+
+# The one translation table for each audience; the most specific class listed wins.
+HTTP_STATUS: dict[type[WottHubError], int] = {
+    InvalidInput: 400,
+    NotFound: 404,
+    Conflict: 409,
+    DriverError: 422,
+    HistoryError: 503,
+    WottHubError: 500,
+}
+
+EXIT_CODES: dict[type[WottHubError], int] = {
+    ConfigError: 2,
+    InvalidInput: 2,
+    NotFound: 3,
+    Conflict: 4,
+    DriverError: 5,
+    HistoryError: 6,
+    WottHubError: 1,
+}
+
+
+def _lookup(table: dict[type[WottHubError], int], exc: WottHubError) -> int:
+    for cls in type(exc).__mro__:
+        if cls in table:
+            return table[cls]
+    return table[WottHubError]
+
+
+def http_status(exc: WottHubError) -> int:
+    """The HTTP status a route answers for ``exc`` (with a problem+json body naming it)."""
+    return _lookup(HTTP_STATUS, exc)
+
+
+def exit_code(exc: WottHubError) -> int:
+    """The exit code ``wott-hub`` ends with for ``exc`` (after one line on stderr)."""
+    return _lookup(EXIT_CODES, exc)

@@ -1,0 +1,57 @@
+"""What this process knows about the health of one history database.
+
+The writer and the reader of a hub open the same engine; a read error the
+reader meets (SSE resume, replay) and the integrity check the writer runs at
+start both land here, so ``HistoryWriter.health()`` reports them in one place.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import weakref
+from dataclasses import dataclass
+
+from sqlalchemy.engine import Engine
+
+__all__ = ["DatabaseState", "is_corruption", "state_of"]
+
+_CORRUPT = ("malformed", "not a database", "corrupt", "disk i/o error")
+
+
+def is_corruption(message: str) -> bool:
+    """Does a driver's error text say the file itself is damaged (not a lock, not a bad query)?"""
+    low = message.lower()
+    return any(word in low for word in _CORRUPT)
+
+
+@dataclass(eq=False)
+class DatabaseState:
+    integrity: str | None = None  # None: not checked yet; "ok"; else the problem found
+    read_errors: int = 0
+    last_read_error: str = ""
+    last_read_error_at: float = 0.0  # time.monotonic()
+
+    def read_failed(self, message: str) -> None:
+        self.read_errors += 1
+        self.last_read_error = message
+        self.last_read_error_at = time.monotonic()
+        if is_corruption(message):
+            self.integrity = message
+
+    @property
+    def corrupted(self) -> str:
+        """The problem if the database is known to be damaged, else ""."""
+        return self.integrity if self.integrity not in (None, "ok") else ""
+
+
+_STATES: weakref.WeakKeyDictionary[Engine, DatabaseState] = weakref.WeakKeyDictionary()
+_LOCK = threading.Lock()
+
+
+def state_of(engine: Engine) -> DatabaseState:
+    with _LOCK:
+        st = _STATES.get(engine)
+        if st is None:
+            st = _STATES[engine] = DatabaseState()
+        return st

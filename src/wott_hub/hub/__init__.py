@@ -1,0 +1,14 @@
+"""The hub: devices in, one servient out, every event recorded (lifecycle.py says how).
+
+The package's public names are here (``from wott_hub.hub import Hub, serve``);
+its modules are internal and never import this one (tests/test_architecture.py).
+"""
+
+from .devices import DeviceRuntime
+from .lifecycle import Hub
+from .pipeline import DevicePipeline, RecordSink, skin_deformed_json
+from .replay import ReplayRuntime
+from .serve import serve
+
+__all__ = ["DevicePipeline", "DeviceRuntime", "Hub", "RecordSink", "ReplayRuntime", "serve",
+           "skin_deformed_json"]

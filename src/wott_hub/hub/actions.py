@@ -1,0 +1,96 @@
+"""Actions over HTTP, the one way: the hub Thing's (replay, history, fleet) and the devices'.
+
+An action is an affordance and an async callable taking the input object and answering the
+output, written as JSON, or a ``Stream`` written chunk by chunk with its own media type. The
+hub Thing declares each in its TD with one POST form (``response`` in an affordance: the form's
+response media type) under ``/wot/hub/actions/<name>``. A body that is not a JSON object is a
+400; a ``WottHubError`` the callable raises is the problem+json status of ``errors.http_status``
+with its message, which names the field at fault. An empty or ``null`` body is no input (``{}``).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import tornado.web
+
+from wott_hub.errors import InvalidInput, WottHubError, http_status
+from wott_hub.servient import HUB_THING_ID
+from wott_hub.servient.http import BaseHandler
+
+if TYPE_CHECKING:
+    from wott_hub.servient.server import HubServer
+
+__all__ = ["ActionHandler", "Invoke", "Stream", "Table", "install"]
+
+Invoke = Callable[..., Awaitable[Any]]
+"""``invoke(input, **route_groups)``: the action's output, or a ``Stream``."""
+Table = Mapping[str, tuple[dict[str, Any], Invoke]]
+"""An action's name -> its affordance and its ``Invoke``."""
+
+
+@dataclass(frozen=True)
+class Stream:
+    """An output too large for one JSON document (records, an MCAP file): sent as it comes."""
+
+    content_type: str
+    chunks: AsyncIterator[bytes | str]
+
+
+def install(td: dict[str, Any], server: HubServer, table: Table) -> None:
+    """Declare ``table``'s actions in the hub Thing's TD (before it is served) and mount their handlers."""
+    base = server.layout.thing_url(HUB_THING_ID)
+    actions = td.setdefault("actions", {})
+    for name, (affordance, _) in table.items():
+        aff = copy.deepcopy(affordance)
+        response = aff.pop("response", None)
+        form: dict[str, Any] = {"href": f"{base}/actions/{name}", "op": ["invokeaction"],
+                                "htv:methodName": "POST", "contentType": "application/json"}
+        if response:
+            form["response"] = {"contentType": response}
+        aff["forms"] = [form]
+        actions[name] = aff
+    server.add_handlers([(rf"/wot/{HUB_THING_ID}/actions/{name}", ActionHandler, {"invoke": invoke})
+                         for name, (_, invoke) in table.items()])
+
+
+class ActionHandler(BaseHandler):
+    """POST: the action; OPTIONS: its CORS preflight. CORS headers and problem+json from ``BaseHandler``."""
+
+    def initialize(self, invoke: Invoke) -> None:
+        self.invoke = invoke
+
+    def options(self, *_args: Any, **_kwargs: Any) -> None:
+        self.set_header("Access-Control-Allow-Methods", "POST, OPTIONS")
+        self.set_header("Access-Control-Allow-Headers", "Content-Type, Accept")
+        self.set_status(204)
+
+    async def post(self, **groups: str) -> None:
+        try:
+            out = await self.invoke(self._input(), **groups)
+            if isinstance(out, Stream):
+                self.set_header("Content-Type", out.content_type)
+                async for chunk in out.chunks:
+                    self.write(chunk)
+                    await self.flush()
+                self.finish()
+                return
+        except WottHubError as e:
+            raise tornado.web.HTTPError(http_status(e), reason=str(e)) from None
+        self.write_json_text(json.dumps(out))
+
+    def _input(self) -> dict[str, Any]:
+        body = self.request.body.strip() if self.request.body else b""
+        try:
+            value = json.loads(body) if body else None
+        except ValueError as e:
+            raise InvalidInput(f"the body is not JSON: {e}") from None
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            raise InvalidInput("the input must be a JSON object")
+        return value

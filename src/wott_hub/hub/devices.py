@@ -1,0 +1,218 @@
+"""The hub's devices: open each (here or in a worker process), serve it, run its pipeline.
+
+A device is a ``DeviceRuntime``: its served Thing and its ``DevicePipeline``
+(pipeline.py). Opened in-process, the pipeline runs here as a task and writes
+into the event plane; opened in a worker process (``[hub] workers``), the
+pipeline runs there (workers.py) and the hub keeps a pipeline without a
+processor, fed with the records, health and end the worker sends.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from wott_hub.errors import Conflict
+from wott_hub.servient import ServedThing, clean_td
+from wott_hub.td.builder import build_tactile_td, static_property_values
+
+from .device_actions import action_names
+from .pipeline import CONTACTS, UNAVAILABLE, DevicePipeline, open_driver
+
+if TYPE_CHECKING:
+    from wott_hub.config import HubConfig
+    from wott_hub.drivers.base import Driver
+    from wott_hub.events.plane import EventPlane
+    from wott_hub.plugins.model import DeviceConfig
+    from wott_hub.tactile import DeviceDescription, FrameProcessor
+
+    from .recording import HubHistory
+    from .things import Things
+    from .workers import WorkerDevice, WorkerPool
+
+__all__ = ["DeviceRuntime", "Devices"]
+
+log = logging.getLogger("wott_hub.hub")
+
+
+@dataclass(eq=False)
+class DeviceRuntime:
+    """One served device: its Thing, its pipeline and, when it runs in a worker process, its proxy."""
+
+    id: str
+    family: str
+    thing: ServedThing
+    pipeline: DevicePipeline
+    worker: WorkerDevice | None = None  # set: the pipeline runs in that worker's process
+    task: asyncio.Task[None] | None = None
+    config: DeviceConfig | None = None  # what it was opened from (None: Hub.add_driver); restart reopens it
+    actions: dict[str, Any] = field(default_factory=dict)  # device actions' counters (device_actions.py)
+
+    @property
+    def driver(self) -> Driver | WorkerDevice:
+        """The device's ``Driver``, or its ``WorkerDevice`` proxy."""
+        return self.pipeline.driver
+
+    @property
+    def processor(self) -> FrameProcessor | None:
+        """None when a worker process processes the frames."""
+        return self.pipeline.processor
+
+    @property
+    def record(self) -> bool:
+        return self.thing.record
+
+    def health_state(self) -> tuple[str, str]:
+        return self.pipeline.health_state()
+
+
+class Devices:
+    def __init__(self, config: HubConfig, plane: EventPlane, things: Things, history: HubHistory) -> None:
+        self.config = config
+        self.plane = plane
+        self.things = things
+        self.history = history
+        self.running: dict[str, DeviceRuntime] = {}
+        self.failed: dict[str, str] = {}  # configured devices that could not be opened: why
+        self.pool: WorkerPool | None = None  # when [hub] workers > 0
+        self.live = False  # the hub is up: a worker that exits now is an error
+
+    async def open_configured(self) -> None:
+        """Open and serve every configured device (not run yet); one that fails is reported and the
+        others are served."""
+        from wott_hub.errors import DriverError
+
+        cfg = self.config
+        if cfg.workers > 0 and cfg.devices:
+            from .workers import WorkerPool  # multiprocessing only when it is used
+
+            self.pool = WorkerPool(cfg.workers, self.on_worker_message)
+        for dcfg in cfg.devices:
+            try:
+                await self.add_device(dcfg, run=False)
+            except (DriverError, Conflict) as e:  # one bad device must not keep the fleet down
+                log.error("device %s not started: %s", dcfg.id, e)
+                self.failed[dcfg.id] = str(e)
+            except Exception as e:  # a description the hub cannot serve (plugin data): that device only
+                log.exception("device %s not started", dcfg.id)
+                self.failed[dcfg.id] = f"device {dcfg.id!r}: {type(e).__name__}: {e}"
+
+    async def run_all(self) -> None:
+        """Once history is open: attach each device to it and start its pipeline."""
+        for dev in list(self.running.values()):
+            await self._attach(dev)
+            self._run(dev)
+
+    async def add_device(self, dcfg: DeviceConfig, *, run: bool = True) -> DeviceRuntime:
+        """Open a configured device (``wott_hub.plugins.DeviceConfig``) and serve it."""
+        record = dcfg.id not in self.config.history_skip
+        if self.pool is not None:  # opened in a worker process: its frames are processed there
+            proxy, _family = await self.pool.open(dcfg)
+            return await self._add(proxy.description, DevicePipeline(dcfg.id, proxy, None), proxy,
+                                   family=dcfg.family, record=record, run=run, config=dcfg)
+        # open + prepare (e.g. a network device's mesh, read before its TD can be built), isolated
+        driver = await open_driver(dcfg)
+        return await self.add_driver(driver, device_id=dcfg.id, family=dcfg.family, record=record, run=run,
+                                     config=dcfg)
+
+    async def add_driver(self, driver: Driver, *, device_id: str | None = None, family: str | None = None,
+                         record: bool = True, run: bool = True,
+                         config: DeviceConfig | None = None) -> DeviceRuntime:
+        """Serve an open driver as a device Thing and (``run``) start its pipeline here; ``config``: the
+        ``DeviceConfig`` it was opened from (its ``restart`` action opens it again from that)."""
+        from wott_hub.tactile import FrameProcessor
+        from wott_hub.tactile.processing import processing_params
+
+        desc = driver.description
+        tid = device_id or desc.id
+        pipeline = DevicePipeline(tid, driver, FrameProcessor(desc.mesh, processing_params(desc)))
+        return await self._add(desc, pipeline, None, family=family, record=record, run=run, config=config)
+
+    def _check_free(self, tid: str) -> None:
+        if tid in self.things.server.things.by_id:
+            raise Conflict(f"device id {tid!r} is already served")
+
+    async def _add(self, desc: DeviceDescription, pipeline: DevicePipeline, worker: WorkerDevice | None, *,
+                   family: str | None, record: bool, run: bool,
+                   config: DeviceConfig | None = None) -> DeviceRuntime:
+        tid = pipeline.thing
+        self._check_free(tid)
+        layout = self.things.server.layout
+        reopenable = config is not None  # restart opens it again from its config (here or in its worker)
+        actions = action_names(pipeline.driver, reopenable=reopenable,
+                               capabilities=worker.capabilities if worker is not None else None)
+        td = build_tactile_td(desc, base=f"{layout.http_base}/", forms=layout.factory(tid),
+                              context_url=layout.context_url, actions=actions)
+        td["id"] = self.things.identity.device_id(tid)
+        td["forms"] = layout.thing_forms(tid)
+        if layout.mqtt is not None:
+            layout.mqtt.add_context(td)
+        clean_td(td)
+        static = static_property_values(desc)
+        static.pop(CONTACTS, None)
+        static.pop(UNAVAILABLE, None)
+        served = ServedThing.create(tid, td, static, record=record and self.config.history)
+        dev = DeviceRuntime(tid, family or desc.family, served, pipeline, worker, config=config)
+        served.dynamic[CONTACTS] = pipeline.read_contacts
+        served.dynamic[UNAVAILABLE] = pipeline.read_unavailable
+        self.things.serve(served)
+        self.running[tid] = dev
+        if run:
+            await self._attach(dev)
+            self._run(dev)
+        return dev
+
+    async def _attach(self, dev: DeviceRuntime) -> None:
+        await self.history.attach(dev.thing, dev.family)
+
+    def _run(self, dev: DeviceRuntime) -> None:
+        if dev.worker is not None:  # its worker process runs it
+            dev.pipeline.state = "running"
+            dev.worker.run(self.plane.trace)
+            return
+        dev.task = asyncio.create_task(dev.pipeline.run(self.plane, trace=self.plane.trace),
+                                       name=f"device:{dev.id}")
+
+    def on_worker_message(self, msg: tuple[Any, ...]) -> None:
+        """Records, health and ends of devices running in worker processes."""
+        kind = msg[0]
+        if kind == "recs":
+            dev = self.running.get(msg[1])
+            if dev is not None:
+                dev.pipeline.remote_records(msg[2], self.plane)
+        elif kind == "health":
+            for did, report in msg[1].items():
+                dev = self.running.get(did)
+                if dev is not None:
+                    dev.pipeline.remote_health(*report)
+        elif kind == "ended":
+            dev = self.running.get(msg[1])
+            if dev is not None:
+                dev.pipeline.state, dev.pipeline.reason = "ended", msg[2]
+        elif kind == "worker_exit" and self.live:
+            log.error("worker process %d exited; its devices stopped", msg[1])
+            for dev in self.running.values():
+                if dev.worker is not None and dev.worker.worker == msg[1]:
+                    dev.pipeline.state, dev.pipeline.reason = "failed", "its worker process exited"
+
+    async def remove(self, device_id: str) -> None:
+        dev = self.running.pop(device_id)
+        if dev.task is not None:
+            dev.task.cancel()
+        await dev.pipeline.close()
+        if dev.task is not None:
+            await asyncio.gather(dev.task, return_exceptions=True)
+        self.things.unserve(device_id)
+
+    async def stop(self) -> None:
+        """Stop every pipeline and close every driver, then the worker processes."""
+        tasks = [d.task for d in self.running.values() if d.task is not None]
+        for t in tasks:
+            t.cancel()
+        for d in self.running.values():
+            await d.pipeline.close()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        if self.pool is not None:
+            await self.pool.close()

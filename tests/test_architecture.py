@@ -1,0 +1,184 @@
+"""The import structure of ``src/wott_hub`` (docs/architecture.md): no cycles, and a hub package whose
+modules never import its top.
+
+The graph is built from the modules' own source (``ast``), not by importing them: every
+runtime import counts, at module level or inside a function (a lazy import still ties the
+two modules together), and only those under ``if TYPE_CHECKING:`` do not. ``from x import y``
+is an edge to ``x.y`` when that is a module, else to ``x``.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import wott_hub
+
+SRC = Path(wott_hub.__file__).parent
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for path in SRC.rglob("*.py"):
+        parts = ["wott_hub", *path.relative_to(SRC).with_suffix("").parts]
+        if parts[-1] == "__init__":
+            parts.pop()
+        out[".".join(parts)] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def _runtime_imports(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
+    found: list[ast.Import | ast.ImportFrom] = []
+
+    def visit(node: ast.AST) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and _is_type_checking(child.test):
+                for orelse in child.orelse:  # the else branch runs
+                    visit_one(orelse)
+                continue
+            visit_one(child)
+
+    def visit_one(node: ast.AST) -> None:
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            found.append(node)
+        visit(node)
+
+    visit(tree)
+    return found
+
+
+def _targets(module: str, node: ast.Import | ast.ImportFrom) -> set[str]:
+    if isinstance(node, ast.Import):
+        return {a.name for a in node.names}
+    if node.level:  # relative: from the module's package
+        package = module if MODULES[module].name == "__init__.py" else module.rpartition(".")[0]
+        for _ in range(node.level - 1):
+            package = package.rpartition(".")[0]
+        base = f"{package}.{node.module}" if node.module else package
+    else:
+        base = node.module or ""
+    out = set()
+    for alias in node.names:
+        sub = f"{base}.{alias.name}"
+        out.add(sub if sub in MODULES else base)
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {}
+    for module, path in MODULES.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        edges = set()
+        for node in _runtime_imports(tree):
+            for target in _targets(module, node):
+                while target and target not in MODULES and target.startswith("wott_hub."):
+                    target = target.rpartition(".")[0]  # a name inside a module
+                if target in MODULES and target != module:
+                    edges.add(target)
+        graph[module] = edges
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """One cycle through each strongly connected component of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components: list[list[str]] = []
+
+    def connect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                components.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            connect(v)
+    return [_a_cycle(graph, comp) for comp in components]
+
+
+def _a_cycle(graph: dict[str, set[str]], component: list[str]) -> list[str]:
+    """A shortest path from the component's first module back to itself (breadth first)."""
+    members = set(component)
+    start = component[0]
+    paths = {start: [start]}
+    queue = [start]
+    while queue:
+        v = queue.pop(0)
+        for w in sorted(graph[v] & members):
+            if w == start:
+                return [*paths[v], start]
+            if w not in paths:
+                paths[w] = [*paths[v], w]
+                queue.append(w)
+    return component
+
+
+def test_the_graph_sees_the_imports_it_must():
+    graph = import_graph()
+    assert "wott_hub.hub.lifecycle" in graph["wott_hub.hub"]  # relative, from a package
+    assert "wott_hub.hub.pipeline" in graph["wott_hub.hub.devices"]
+    assert "wott_hub.tactile.processing" in graph["wott_hub.hub.devices"]  # inside a function
+    assert "wott_hub.hub.lifecycle" not in graph["wott_hub.hub.status"]  # only under TYPE_CHECKING
+
+
+def test_src_has_no_import_cycle():
+    found = cycles(import_graph())
+    assert not found, "import cycles: " + "; ".join(" -> ".join(c) for c in found)
+
+
+def test_no_module_of_the_hub_package_imports_the_package_top():
+    graph = import_graph()
+    offenders = sorted(m for m, edges in graph.items()
+                       if m.startswith("wott_hub.hub.") and "wott_hub.hub" in edges)
+    assert offenders == []
+
+
+# docs/architecture.md, "Direction of imports": a module imports only from its own layer or the
+# layers above it. Keys are the first name under wott_hub (a package or a top-level module).
+LAYERS: dict[str, int] = {
+    "errors": 1, "tactile": 1,
+    "td": 2, "sim": 2, "events": 2, "configspec": 2,
+    "drivers": 3, "plugins": 3, "discovery": 3, "examples": 3,
+    "history": 4, "web": 4, "servient": 4, "security": 4, "mqtt": 4,
+    "network": 5, "config": 5, "config_docs": 5,
+    "hub": 6,
+    "cli": 7, "plugin_api": 7, "": 7,  # "": the package face, wott_hub/__init__.py
+}
+
+
+def _layer(module: str) -> int:
+    top = module.removeprefix("wott_hub").lstrip(".").partition(".")[0]
+    assert top in LAYERS, f"{module}: no layer in docs/architecture.md; add its package there and here"
+    return LAYERS[top]
+
+
+def test_imports_go_only_to_the_same_layer_or_above():
+    wrong = sorted(f"{m} (layer {_layer(m)}) imports {t} (layer {_layer(t)})"
+                   for m, targets in import_graph().items() for t in targets if _layer(t) > _layer(m))
+    assert not wrong, "imports against docs/architecture.md's layers:\n" + "\n".join(wrong)

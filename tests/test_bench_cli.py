@@ -1,0 +1,59 @@
+"""``wott-hub bench``: finds the benchmarks in the checkout (scripts and packages) and rejects bad options
+with one line and exit code 2, before any measurement starts.
+
+No benchmark is run here: the smallest hub group takes far longer than a test may on the shared
+machine (see docs/benchmarks.md for how to run one).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+WOTT_HUB = str(Path(sys.executable).parent / "wott-hub")
+
+
+def _bench(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([WOTT_HUB, "bench", *args], cwd=ROOT, capture_output=True, text=True, timeout=60)
+
+
+def test_lists_script_and_package_benchmarks():
+    res = _bench()
+    assert res.returncode == 0, res.stderr
+    names = res.stdout.split()
+    assert "hub" in names  # the package benchmarks/bench_hub/
+    assert "directory" in names  # a script, benchmarks/bench_directory.py
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--groups", "latency,nope"], "unknown group nope"),
+    (["--devices", "0"], "--devices"),
+    (["--devices", "eight"], "--devices"),
+    (["--duration", "-1"], "--duration"),
+    (["--workers", "0"], "--workers"),
+    (["--workers", "one"], "--workers"),
+    (["--workers", "65"], "--workers"),
+])
+def test_hub_bad_option_is_one_line_and_exit_2(args, message):
+    res = _bench("hub", *args, "--no-write")
+    assert res.returncode == 2
+    assert message in res.stderr
+    assert "Traceback" not in res.stderr
+    assert not res.stdout  # stopped before any group started
+
+
+def test_unknown_benchmark_names_the_available_ones():
+    res = _bench("nope")
+    assert res.returncode == 2
+    assert "unknown benchmark 'nope'" in res.stderr and "hub" in res.stderr
+
+
+def test_hub_help_offers_the_64_device_point_and_worker_variants():
+    res = _bench("hub", "--", "--help")  # after `--`: the benchmark's own help, not the CLI's
+    assert res.returncode == 0, res.stderr
+    assert "1,8,32,64" in res.stdout  # the 64 x 120 Hz point is in the default latency points
+    assert "--workers" in res.stdout and "--devices" in res.stdout
