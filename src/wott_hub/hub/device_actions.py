@@ -29,7 +29,6 @@ errors are the in-process ones, here.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import re
 import time
@@ -43,6 +42,7 @@ from wott_hub.td.actions import ALWAYS
 
 from .actions import ActionHandler
 from .pipeline import driver_capabilities, open_driver, restart_backoff
+from .tasks import TasksById
 
 if TYPE_CHECKING:
     from wott_hub.drivers.base import Driver
@@ -85,7 +85,7 @@ class DeviceActions:
     def __init__(self, devices: Devices, plane: EventPlane) -> None:
         self.devices = devices
         self.plane = plane
-        self.reopening: dict[str, asyncio.Task[None]] = {}  # device id -> its re-open retry loop
+        self.reopening = TasksById("reopen")  # device id -> its re-open retry loop
         self._restarting: set[str] = set()
 
     def declared(self, dev: DeviceRuntime) -> list[str]:
@@ -193,48 +193,37 @@ class DeviceActions:
 
     def _fail_and_retry(self, dev: DeviceRuntime, reason: str) -> None:
         dev.pipeline.state, dev.pipeline.reason = "failed", reason
-        self.reopening[dev.id] = asyncio.create_task(self._reopen(dev, reason), name=f"reopen:{dev.id}")
+        self.reopening.start(dev.id, self._reopen(dev, reason))
 
     async def _reopen(self, dev: DeviceRuntime, reason: str) -> None:
         """Open ``dev`` again with backoff until it opens (then it runs) or the task is cancelled."""
         backoff = restart_backoff()
         config = dev.config
         assert config is not None  # restart refuses a device without one
-        try:
-            while True:
-                delay = backoff.next_delay()
-                dev.pipeline.reason = f"{reason} (retry {backoff.attempts} in {delay:.1f} s)"
-                await asyncio.sleep(delay)
-                try:
-                    driver = await open_driver(config)
-                except DriverError as e:
-                    reason = str(e)
-                    continue
-                if self.devices.running.get(dev.id) is not dev:  # removed meanwhile
-                    await driver.close()
-                    return
-                try:
-                    self._resume(dev, driver)
-                except Conflict as e:
-                    await dev.pipeline.close()
-                    dev.pipeline.state, dev.pipeline.reason = "failed", str(e)
+        while True:
+            delay = backoff.next_delay()
+            dev.pipeline.reason = f"{reason} (retry {backoff.attempts} in {delay:.1f} s)"
+            await asyncio.sleep(delay)
+            try:
+                driver = await open_driver(config)
+            except DriverError as e:
+                reason = str(e)
+                continue
+            if self.devices.running.get(dev.id) is not dev:  # removed meanwhile
+                await driver.close()
                 return
-        finally:
-            if self.reopening.get(dev.id) is asyncio.current_task():
-                del self.reopening[dev.id]
+            try:
+                self._resume(dev, driver)
+            except Conflict as e:
+                await dev.pipeline.close()
+                dev.pipeline.state, dev.pipeline.reason = "failed", str(e)
+            return
 
     def cancel_reopen(self, device_id: str) -> None:
-        task = self.reopening.pop(device_id, None)
-        if task is not None:
-            task.cancel()
+        self.reopening.cancel(device_id)
 
     async def stop(self) -> None:
-        tasks = list(self.reopening.values())
-        self.reopening.clear()
-        for t in tasks:
-            t.cancel()
-        with contextlib.suppress(Exception):
-            await asyncio.gather(*tasks, return_exceptions=True)
+        await self.reopening.stop()
 
     # --- HTTP -----------------------------------------------------------------------------------
 

@@ -24,7 +24,6 @@ nothing kept. ``removeDevice``/``restartDevice`` of an unknown id → 404.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from typing import TYPE_CHECKING, Any
@@ -34,6 +33,7 @@ from wott_hub.servient import HUB_THING_ID
 
 from .actions import install as install_actions
 from .pipeline import restart_backoff
+from .tasks import TasksById
 
 if TYPE_CHECKING:
     from wott_hub.config import HubConfig
@@ -108,7 +108,7 @@ class FleetManagement:
         self.devices = devices
         self.actions = actions
         self.configs: dict[str, DeviceConfig] = {d.id: d for d in config.devices}  # by id, for retries
-        self.retrying: dict[str, asyncio.Task[None]] = {}  # failed to open (not served): its retry loop
+        self.retrying = TasksById("retry")  # failed to open (not served): its retry loop
 
     # --- the actions ----------------------------------------------------------------------------
 
@@ -146,7 +146,7 @@ class FleetManagement:
     async def remove(self, device_id: Any) -> dict[str, Any]:
         """``removeDevice``: stop retrying it, or stop and unserve it."""
         device_id = _id(device_id)
-        self._cancel_retry(device_id)
+        self.retrying.cancel(device_id)
         if device_id in self.devices.running:
             self.actions.cancel_reopen(device_id)
             await self.devices.remove(device_id)
@@ -167,7 +167,7 @@ class FleetManagement:
         dcfg = self.configs.get(device_id)
         if device_id not in self.devices.failed or dcfg is None:
             raise NotFound(f"no device {device_id!r} on this hub")
-        self._cancel_retry(device_id)
+        self.retrying.cancel(device_id)
         t_ns = time.time_ns()
         try:
             await self.devices.add_device(dcfg)
@@ -197,46 +197,32 @@ class FleetManagement:
 
     def _retry(self, dcfg: DeviceConfig, reason: str) -> None:
         self.devices.failed[dcfg.id] = reason
-        self.retrying[dcfg.id] = asyncio.create_task(self._retry_loop(dcfg, reason), name=f"retry:{dcfg.id}")
+        self.retrying.start(dcfg.id, self._retry_loop(dcfg, reason))
 
     async def _retry_loop(self, dcfg: DeviceConfig, reason: str) -> None:
         backoff = restart_backoff()
-        try:
-            while True:
-                delay = backoff.next_delay()
-                self.devices.failed[dcfg.id] = f"{reason} (retry {backoff.attempts} in {delay:.1f} s)"
-                await asyncio.sleep(delay)
-                try:
-                    await self.devices.add_device(dcfg)
-                except Conflict as e:  # its id was taken meanwhile (an embedding program): give up
-                    self.devices.failed[dcfg.id] = str(e)
-                    return
-                except DriverError as e:
-                    reason = str(e)
-                    continue
-                except Exception as e:  # a description the hub cannot serve: keep trying, say why
-                    log.exception("device %s not started", dcfg.id)
-                    reason = f"device {dcfg.id!r}: {type(e).__name__}: {e}"
-                    continue
-                self.devices.failed.pop(dcfg.id, None)
-                log.info("device %s opened after %d attempt(s)", dcfg.id, backoff.attempts)
+        while True:
+            delay = backoff.next_delay()
+            self.devices.failed[dcfg.id] = f"{reason} (retry {backoff.attempts} in {delay:.1f} s)"
+            await asyncio.sleep(delay)
+            try:
+                await self.devices.add_device(dcfg)
+            except Conflict as e:  # its id was taken meanwhile (an embedding program): give up
+                self.devices.failed[dcfg.id] = str(e)
                 return
-        finally:
-            if self.retrying.get(dcfg.id) is asyncio.current_task():
-                del self.retrying[dcfg.id]
-
-    def _cancel_retry(self, device_id: str) -> None:
-        task = self.retrying.pop(device_id, None)
-        if task is not None:
-            task.cancel()
+            except DriverError as e:
+                reason = str(e)
+                continue
+            except Exception as e:  # a description the hub cannot serve: keep trying, say why
+                log.exception("device %s not started", dcfg.id)
+                reason = f"device {dcfg.id!r}: {type(e).__name__}: {e}"
+                continue
+            self.devices.failed.pop(dcfg.id, None)
+            log.info("device %s opened after %d attempt(s)", dcfg.id, backoff.attempts)
+            return
 
     async def stop(self) -> None:
-        tasks = list(self.retrying.values())
-        self.retrying.clear()
-        for t in tasks:
-            t.cancel()
-        with contextlib.suppress(Exception):
-            await asyncio.gather(*tasks, return_exceptions=True)
+        await self.retrying.stop()
         await self.actions.stop()
 
     # --- HTTP -----------------------------------------------------------------------------------
