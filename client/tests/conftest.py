@@ -10,23 +10,22 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-DEVICE_SIM = ROOT / "tests" / "discovery" / "wot_device_sim.py"
 
 
-def _hub_helpers():
-    spec = importlib.util.spec_from_file_location("wott_hub_test_helpers", ROOT / "tests" / "conftest.py")
+def _load(name: str, path: Path):
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
-HELPERS = _hub_helpers()
+HELPERS = _load("wott_hub_test_helpers", ROOT / "tests" / "conftest.py")
+DISCOVERY = _load("wott_hub_discovery_helpers", ROOT / "tests" / "discovery" / "conftest.py")
 
 
 @pytest.fixture(scope="session")
@@ -52,38 +51,12 @@ def hub():
     h.stop()
 
 
-class DeviceSim:
-    """tests/discovery/wot_device_sim.py in its own process: another server's Tactile TD, its SSE
-    stream (named messages, ids in µs), ``POST /press`` and ``POST /outage``, announced on mDNS."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self.proc: asyncio.subprocess.Process | None = None
-        self.url = ""
-
-    @property
-    def base(self) -> str:
-        return self.url.removesuffix("td")
-
-    async def start(self) -> DeviceSim:
-        self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, str(DEVICE_SIM), "--host", "127.0.0.1", "--name", self.name,
-            "--id", f"urn:example:{self.name}", stdout=asyncio.subprocess.PIPE)
-        line = (await asyncio.wait_for(self.proc.stdout.readline(), 30)).decode()
-        assert line.startswith("READY "), line
-        self.url = line.split()[1]
-        return self
-
-    async def stop(self) -> None:
-        if self.proc is not None and self.proc.returncode is None:
-            self.proc.terminate()
-            await asyncio.wait_for(self.proc.wait(), 15)
-
-
 @pytest.fixture(scope="session")
 def device_sim():
-    """``sim = await device_sim(name).start()`` ... ``await sim.stop()`` in the test's event loop."""
-    return DeviceSim
+    """``sim = await device_sim(name).start()`` ... ``await sim.stop()`` in the test's event loop:
+    tests/discovery's simulator (another server's Tactile TD, its SSE stream with named messages
+    and ids in µs, ``POST /press`` and ``POST /outage``, announced on mDNS)."""
+    return lambda name: DISCOVERY.Sim("127.0.0.1", name=name, thing_id=f"urn:example:{name}")
 
 
 class Proxy:
