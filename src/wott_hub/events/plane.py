@@ -40,7 +40,7 @@ from typing import Protocol
 
 from wott_hub.errors import HistoryError
 
-from .record import Record
+from .record import Record, SkinArrays
 from .subscriber import Interest, Subscriber
 
 __all__ = ["DURABILITY", "EventPlane", "HistorySink", "HistorySource", "Stream", "Tap"]
@@ -163,10 +163,10 @@ class EventPlane:
         return st.record or st.interested(kind, name) or any(t.active for t in st.taps)
 
     def publish(self, thing: str, kind: int, name: str, t_ns: int, data: str,
-                trace: dict[str, int] | None = None) -> Record:
+                trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> Record:
         st = self.streams[thing]
         st.seq += 1
-        rec = Record(thing, st.seq, kind, name, t_ns, data, trace)
+        rec = Record(thing, st.seq, kind, name, t_ns, data, trace, skin)
         st.counts[name] += 1
         ring = st.ring
         ring.append(rec)

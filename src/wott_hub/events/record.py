@@ -14,9 +14,12 @@ message with ``event: <affordance>`` so that its reader can tell them apart.
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
-__all__ = ["KIND_EVENT", "KIND_NAMES", "KIND_PROPERTY", "Record", "encode"]
+if TYPE_CHECKING:
+    import numpy as np
+
+__all__ = ["KIND_EVENT", "KIND_NAMES", "KIND_PROPERTY", "Record", "SkinArrays", "encode"]
 
 KIND_EVENT = 0
 KIND_PROPERTY = 1
@@ -31,17 +34,27 @@ raise ValueError: JSON has no such numbers, and a record carrying them would be 
 SSE, WebSocket and history alike (the frame pump counts it as a frame error)."""
 
 
+class SkinArrays(NamedTuple):
+    """A skin packet as the pipeline computed it, riding along its JSON text: history packs
+    these arrays instead of parsing the text back (``history.codec``). ``intensity`` holds the
+    values the text shows (mm, rounded); ``ids`` the node ids, ascending."""
+
+    ids: np.ndarray
+    intensity: np.ndarray
+
+
 class Record:
     """``seq`` is per Thing, strictly increasing, never reused (see EventPlane).
 
     ``trace`` is None unless latency tracing is on (benchmarks): then it holds
-    perf_counter_ns stamps of the pipeline stages.
+    perf_counter_ns stamps of the pipeline stages. ``skin``: see ``SkinArrays`` (None: the
+    text is all there is).
     """
 
-    __slots__ = ("_sse", "_sse_named", "data", "kind", "name", "seq", "t_ns", "thing", "trace")
+    __slots__ = ("_sse", "_sse_named", "data", "kind", "name", "seq", "skin", "t_ns", "thing", "trace")
 
     def __init__(self, thing: str, seq: int, kind: int, name: str, t_ns: int, data: str,
-                 trace: dict[str, int] | None = None) -> None:
+                 trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> None:
         self.thing = thing
         self.seq = seq
         self.kind = kind
@@ -49,6 +62,7 @@ class Record:
         self.t_ns = t_ns
         self.data = data
         self.trace = trace
+        self.skin = skin
         self._sse: bytes | None = None
         self._sse_named: bytes | None = None
 

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from wott_hub.drivers.backoff import Backoff
 from wott_hub.drivers.base import Driver, Health, HealthStatus, Recalibratable, Tareable
 from wott_hub.errors import Conflict, DriverError, NotFound
-from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, encode
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, SkinArrays, encode
 from wott_hub.plugins.isolation import CAUGHT, Guard, attempt, attempt_async
 from wott_hub.tactile import DeviceDescription, FrameError, FrameProcessor, FrameResult
 
@@ -81,7 +81,7 @@ def driver_capabilities(driver: Driver | WorkerDevice) -> tuple[str, ...]:
 
 
 Wants = Callable[[str, int, str], bool]
-Publish = Callable[[str, int, str, int, str, "dict[str, int] | None"], Any]
+Publish = Callable[[str, int, str, int, str, "dict[str, int] | None", "SkinArrays | None"], Any]
 
 
 class RecordSink(Protocol):
@@ -92,7 +92,7 @@ class RecordSink(Protocol):
         ...
 
     def publish(self, thing: str, kind: int, name: str, t_ns: int, data: str,
-                trace: dict[str, int] | None = None) -> Any:
+                trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> Any:
         ...
 
 
@@ -210,7 +210,7 @@ class DevicePipeline:
         ids = [int(i) for i in nodes or ()]
         self.unavailable_json = encode({"numOfUnavailableNodes": len(ids), "arrayOfUnavailableNodes": ids})
         if wants(self.thing, KIND_PROPERTY, UNAVAILABLE):
-            publish(self.thing, KIND_PROPERTY, UNAVAILABLE, t_ns, self.unavailable_json, None)
+            publish(self.thing, KIND_PROPERTY, UNAVAILABLE, t_ns, self.unavailable_json, None, None)
 
     def health_state(self) -> tuple[str, str]:
         """(state, reason): the loop's own while starting and once it is over, else the driver's health.
@@ -284,19 +284,20 @@ class DevicePipeline:
             data = skin_deformed_json(res)
             if trace is not None:
                 trace["enc"] = time.perf_counter_ns()
-            publish(thing, KIND_EVENT, SKIN_DEFORMED, t_ns, data, trace)
+            publish(thing, KIND_EVENT, SKIN_DEFORMED, t_ns, data, trace,
+                    SkinArrays(res.deformed_nodes, res.intensity))
         if res.actions and wants(thing, KIND_EVENT, ACTION):
             for action in res.actions:
-                publish(thing, KIND_EVENT, ACTION, t_ns, encode(action), None)
+                publish(thing, KIND_EVENT, ACTION, t_ns, encode(action), None, None)
         if res.actions and wants(thing, KIND_EVENT, ACTION_DETAILS):
             for details in res.action_details():
-                publish(thing, KIND_EVENT, ACTION_DETAILS, t_ns, encode(details), None)
+                publish(thing, KIND_EVENT, ACTION_DETAILS, t_ns, encode(details), None, None)
         if res.contacts or self.had_contacts:  # the value changes while touched and once at rest
             self.had_contacts = bool(res.contacts)
             self.contacts = res
             if wants(thing, KIND_PROPERTY, CONTACTS):
                 self.contacts_json = encode(res.contact_information())
-                publish(thing, KIND_PROPERTY, CONTACTS, t_ns, self.contacts_json, None)
+                publish(thing, KIND_PROPERTY, CONTACTS, t_ns, self.contacts_json, None, None)
             else:
                 self.contacts_json = None
 

@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 from wott_hub import errors
 from wott_hub.drivers.base import Health, HealthStatus
 from wott_hub.errors import DriverError, WottHubError
+from wott_hub.events.record import SkinArrays
 from wott_hub.tactile import DeviceDescription
 
 from .pipeline import DevicePipeline, driver_capabilities, open_driver, restart_backoff
@@ -239,7 +240,7 @@ class PipeSink:
         return True
 
     def publish(self, _thing: str, kind: int, name: str, t_ns: int, data: str,
-                trace: dict[str, int] | None = None) -> None:
+                trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> None:
         self._recs.append((kind, name, t_ns, data, trace))
 
     def frame_done(self) -> None:
