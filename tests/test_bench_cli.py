@@ -57,3 +57,18 @@ def test_hub_help_offers_the_64_device_point_and_worker_variants():
     assert res.returncode == 0, res.stderr
     assert "1,8,32,64" in res.stdout  # the 64 x 120 Hz point is in the default latency points
     assert "--workers" in res.stdout and "--devices" in res.stdout
+
+
+def test_a_run_of_some_hub_groups_keeps_the_other_groups_tables(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    from bench_hub import report
+
+    doc = tmp_path / "benchmarks.md"
+    doc.write_text("# Benchmarks\n\n<!-- bench:hub -->\n## Hub\n\nRun: `old` · 2026-11-22\n\nLoad 1.\n\n"
+                   "### Latency: old (ms)\n\nL1\n\n### Start-up of the demo scene\n\nS1\n\n"
+                   "### History\n\nH1\n\n(Not re-run: kept from `older`.)\n<!-- /bench:hub -->\n")
+    monkeypatch.setattr(report, "DOC", doc)
+    text = report.keep_others("Load 2.\n\n### Start-up of the demo scene\n\nS2")
+    assert "S2" in text and "S1" not in text  # the group re-run replaces its table
+    assert "### Latency: old (ms)\n\nL1\n\n(Not re-run: kept from `old` · 2026-11-22.)" in text
+    assert text.count("(Not re-run") == 2 and "kept from `older`" in text  # an older note stays as it was

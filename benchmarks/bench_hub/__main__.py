@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> None:
     body = report.body(sections, os.getloadavg()[0], args.quick)
     print(body)
     if not args.no_write:
-        print(report.write(body, _command(args)))
+        print(report.write(body if args.groups == set(GROUPS) else report.keep_others(body), _command(args)))
 
 
 if __name__ == "__main__":

@@ -31,6 +31,8 @@ def client_main(spec: dict) -> None:
     kind = spec["kind"]
     if kind == "sse":
         res = asyncio.run(_sse_client(spec["urls"], spec["duration"]))
+    elif kind == "sse-lean":
+        res = asyncio.run(_sse_lean_client(spec["urls"], spec["duration"]))
     elif kind == "wotpy":
         res = asyncio.run(_wotpy_client(spec["urls"], spec["duration"], spec["event"]))
     elif kind == "ws-raw":
@@ -41,17 +43,23 @@ def client_main(spec: dict) -> None:
         res = _td_get_client(spec["urls"], spec["n"])
     else:
         raise SystemExit(f"unknown client {kind}")
-    print(json.dumps(res), flush=True)
+    print(json.dumps({**res, **_CPU}), flush=True)
 
 
 def _ready() -> None:
     print("ready", flush=True)
 
 
+_CPU: dict[str, float] = {}
+"""The client's own CPU time (s) over its receiving window (``_measure``): its share of the cores."""
+
+
 async def _measure(tasks: list[asyncio.Task], duration: float) -> None:
     """Tell the hub side the client is subscribed, receive for ``duration``, then stop."""
     _ready()
+    cpu0, t0 = time.process_time(), time.monotonic()
     await asyncio.sleep(duration)
+    _CPU.update(cpu_s=time.process_time() - cpu0, window_s=time.monotonic() - t0)
     for t in tasks:
         t.cancel()
     await asyncio.gather(*tasks, return_exceptions=True)
@@ -82,6 +90,74 @@ async def _sse_client(urls: list[str], duration: float) -> dict:
         tasks = [asyncio.create_task(one(i, u, c)) for i, u in enumerate(urls)]
         await asyncio.wait_for(all_connected.wait(), 30)
         await _measure(tasks, duration)
+    return {"events": got}
+
+
+class _LeanSSE(asyncio.Protocol):
+    """One SSE stream over HTTP/1.1 chunked transfer, parsed in place: the instrument should not
+    need the core the hub is measured on. httpx + httpx-sse (``_sse_client``) spend ~200 us of
+    CPU per event (~70 % of a core at 3,300 events/s on this machine); this ~10x less. It still
+    reads every byte, splits messages, takes ``id`` and decodes ``data`` as JSON."""
+
+    def __init__(self, i: int, request: bytes, got: list, connected: asyncio.Future) -> None:
+        self.i, self.request, self.got, self.connected = i, request, got, connected
+        self.raw = b""  # bytes not yet de-chunked
+        self.body = b""  # de-chunked SSE text not yet a whole message
+        self.headers_done = False
+
+    def connection_made(self, transport) -> None:
+        transport.write(self.request)
+
+    def data_received(self, data: bytes) -> None:
+        t = now_ns()
+        raw = self.raw + data
+        if not self.headers_done:
+            end = raw.find(b"\r\n\r\n")
+            if end < 0:
+                self.raw = raw
+                return
+            if not raw.startswith(b"HTTP/1.1 200"):
+                raise RuntimeError(raw[:200])
+            self.headers_done = True
+            raw = raw[end + 4:]
+            self.connected.set_result(None)
+        body = [self.body]
+        while raw:  # chunked transfer: <hex size>\r\n<data>\r\n
+            eol = raw.find(b"\r\n")
+            if eol < 0:
+                break
+            size = int(raw[:eol], 16)
+            if len(raw) < eol + 2 + size + 2:
+                break
+            body.append(raw[eol + 2:eol + 2 + size])
+            raw = raw[eol + 4 + size:]
+        self.raw = raw
+        *messages, self.body = b"".join(body).split(b"\n\n")
+        for m in messages:
+            if not m.startswith(b"id: "):
+                continue  # a comment (": stream open", ": ping")
+            head, _, data = m.partition(b"\ndata: ")
+            stamp = json.loads(data).get("timeStamp", 0)
+            self.got.append((self.i, int(head[4:]), t, now_ns(), stamp))
+
+
+async def _sse_lean_client(urls: list[str], duration: float) -> dict:
+    from urllib.parse import urlsplit
+
+    loop = asyncio.get_running_loop()
+    got: list[tuple] = []
+    transports = []
+    for i, url in enumerate(urls):
+        u = urlsplit(url)
+        request = (f"GET {u.path} HTTP/1.1\r\nHost: {u.netloc}\r\nAccept: text/event-stream\r\n\r\n").encode()
+        connected = loop.create_future()
+        tr, _ = await loop.create_connection(lambda i=i, r=request, f=connected: _LeanSSE(i, r, got, f),
+                                             u.hostname, u.port)
+        await asyncio.wait_for(connected, 30)
+        transports.append(tr)
+    await _measure([], duration)
+    for tr in transports:
+        tr.close()
     return {"events": got}
 
 

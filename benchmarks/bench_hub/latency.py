@@ -66,6 +66,12 @@ def _lookup_processor(processor, frames):
     return process
 
 
+def cpu_cell(r: dict) -> str:
+    """Hub process / client process CPU in the SSE and the WS phase, % of one core."""
+    return " · ".join(f"{kind}: {r['cpu'][key][0]:.0f} / {r['cpu'][key][1]:.0f}"
+                      for kind, key in (("SSE", "sse-lean"), ("WS", "ws-lat")) if key in r["cpu"])
+
+
 def make_driver_class():
     from wott_hub.tactile import TactileFrame
 
@@ -164,17 +170,22 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
                 replace_processing(dev, _lookup_processor(dev.processor, frames))
         plane.stream(did).taps.append(Keep(did))
 
+    cpu: dict[str, tuple[float, float]] = {}  # client kind -> (hub, client) CPU, % of one core
+
     async def phase(spec: dict) -> tuple[dict, int, int]:
         """One client at a time: the wotpy client alone can saturate a core of this machine."""
         c = Client({**spec, "duration": duration + 1.0})
         await c.ready()
         await asyncio.sleep(0.5)  # warm-up
-        t0 = now_ns()
+        t0, cpu0 = now_ns(), time.process_time()
         await asyncio.sleep(duration)
-        t1 = now_ns()
-        return await c.result(), t0, t1
+        t1, cpu1 = now_ns(), time.process_time()
+        res = await c.result()
+        cpu[spec["kind"]] = (100 * (cpu1 - cpu0) / ((t1 - t0) / 1e9),
+                             100 * res.get("cpu_s", float("nan")) / res.get("window_s", float("nan")))
+        return res, t0, t1
 
-    sse_res, s0, s1 = await phase({"kind": "sse",
+    sse_res, s0, s1 = await phase({"kind": "sse-lean",
                                    "urls": [f"{hub.td_url(d)}/events/skinDeformedDetection" for d in ids]})
     raw_res, r0, r1 = await phase({"kind": "ws-lat", "event": "skinDeformedDetection",
                                    "urls": [f"{hub.ws_url}/{d}" for d in ids]})
@@ -223,7 +234,7 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
             "ws_stages": {"fanout": (pct(raw_fanout, 50), pct(raw_fanout, 99)),
                           "transport": (pct(raw_transport, 50), pct(raw_transport, 99))},
             "wotpy_after_write": (pct(wot_after, 50), pct(wot_after, 99)),
-            "wotpy_decode": wot_res.get("decode_ns", float("nan"))}
+            "wotpy_decode": wot_res.get("decode_ns", float("nan")), "cpu": cpu}
 
 
 async def latency_plain(n_dev: int, duration: float) -> dict:
@@ -319,7 +330,7 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
         rows.append([n, f"{r['sse'][0] / dur:.0f} / {n * 120}", cell(r["sse"]), cell(r["ws"]),
                      cell(r["wotpy"]) if n <= 8 else "not run (saturated at 8)",
                      cell((p["published"], p["ws_received"], p["ws_p50"], p["ws_p99"])) if p
-                     else "not run (saturated at 8)"])
+                     else "not run (saturated at 8)", cpu_cell(r)])
         if n >= 8 and not quick or n == 8:
             variants = [(f"workers = {w}", {"workers": w}) for w in workers or DEFAULT_WORKERS]
             for label, kw in (*variants, ("processing precomputed", {"precomputed": True}),
@@ -330,7 +341,7 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
                                      cell(w["ws"]),
                                      *(f"{ms(a)} / {ms(b)}" for a, b in (
                                          w["stages"]["processing"], w["stages"]["fanout"],
-                                         w["stages"]["transport"]))])
+                                         w["stages"]["transport"])), cpu_cell(w)])
                 print(variant_rows[-1], flush=True)
         st, ws = r["stages"], r["ws_stages"]
         stage_rows.append([n, *(f"{ms(a)} / {ms(b)}" for a, b in (

@@ -8,10 +8,12 @@ them when a table changes.
 
 from __future__ import annotations
 
-from report import markdown_table, write_section  # benchmarks/report.py, shared by every benchmark
+import re
 
-__all__ = ["SECTION", "TITLE", "body", "cell", "expose", "history", "latency", "ms", "startup", "throughput",
-           "write"]
+from report import DOC, markdown_table, write_section  # benchmarks/report.py, shared by every benchmark
+
+__all__ = ["SECTION", "TITLE", "body", "cell", "expose", "history", "keep_others", "latency", "ms", "startup",
+           "throughput", "write"]
 
 SECTION = "hub"
 TITLE = "Hub: servient, event plane, history"
@@ -36,7 +38,8 @@ def latency(res: dict) -> str:
         f"### Latency: a frame enters the pipeline -> its event at a client (ms, p50 / p99; "
         f"{res['duration']:g} s per point)\n\n"
         + markdown_table(["devices", "frames/s processed / offered", "hub SSE", "hub WS",
-                          "hub WS, wotpy client", "plain wotpy WS, wotpy client"], res["rows"])
+                          "hub WS, wotpy client", "plain wotpy WS, wotpy client",
+                          "CPU % of a core, hub / client"], res["rows"])
         + repeats
         + "\n\nStages (ms, p50 / p99):\n\n"
         + markdown_table(["devices", "processing", "encoding", "SSE fan-out", "SSE transport",
@@ -45,7 +48,8 @@ def latency(res: dict) -> str:
     if res["variant_rows"]:
         out += ("\n\nVariants: `workers = N`, `processing precomputed` (ms, p50 / p99):\n\n"
                 + markdown_table(["devices", "variant", "frames/s", "hub SSE", "hub WS", "processing",
-                                  "SSE fan-out", "SSE transport"], res["variant_rows"]))
+                                  "SSE fan-out", "SSE transport", "CPU % of a core, hub / client"],
+                                 res["variant_rows"]))
     return out
 
 
@@ -62,12 +66,16 @@ def expose(res: dict) -> str:
 
 
 def startup(res: dict) -> str:
+    rest = res["rest"]
     rows = [[name, i + 1, f"{a:.2f}", f"{b:.2f}", c]
             for name, trials in res["trials"].items() for i, (a, b, c) in enumerate(trials)]
     return ("### Start-up of the demo scene\n\n"
             "`uv run wott-hub run` as typed (target: TDs served <= 1.5 s) and the venv's `wott-hub` "
             "script, trials alternated.\n\n"
-            + markdown_table(["launcher", "trial", "TDs served (s)", "ready (s)", "devices"], rows))
+            + markdown_table(["launcher", "trial", "TDs served (s)", "ready (s)", "devices"], rows)
+            + "\n\nThe demo at rest (ready, no client, its simulated devices playing their looping scenes), "
+            f"over {rest['seconds']:g} s: CPU {rest['cpu_pct']:.0f} % of one core, resident memory "
+            f"{rest['rss_mib']:.0f} MiB (peak {rest['peak_mib']:.0f} MiB).")
 
 
 def history(res: dict) -> str:
@@ -87,6 +95,27 @@ def history(res: dict) -> str:
 def body(sections: list[str], load: float, quick: bool) -> str:
     head = f"Load average at the end: {load:.1f}.{' Quick mode.' if quick else ''}"
     return "\n\n".join([head, *sections])
+
+
+def _heading(sub: str) -> str:
+    """A subsection's anchor: its heading up to the first parenthesis or colon."""
+    return re.split(r"[(:]", sub.splitlines()[0], maxsplit=1)[0].strip()
+
+
+def keep_others(text: str) -> str:
+    """``text`` (a run of some groups) followed by the subsections of the groups it did not run,
+    as docs/benchmarks.md has them, each marked with the run it comes from: re-measuring one
+    group does not delete the others' tables."""
+    old = re.search(rf"<!-- bench:{SECTION} -->.*?<!-- /bench:{SECTION} -->", DOC.read_text(), re.S)
+    if old is None:
+        return text
+    run = re.search(r"^Run: (.*)$", old.group(0), re.M)
+    new = {_heading(s) for s in text.split("\n### ")[1:]}
+    kept = [s for s in old.group(0).removesuffix(f"<!-- /bench:{SECTION} -->").split("\n### ")[1:]
+            if _heading(s) not in new]
+    mark = "(Not re-run: kept from"
+    note = f"\n\n{mark} {run.group(1)}.)" if run else ""
+    return text + "".join(f"\n\n### {s.rstrip()}{'' if mark in s else note}" for s in kept)
 
 
 def write(text: str, command: str):

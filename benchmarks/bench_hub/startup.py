@@ -4,7 +4,8 @@ Two launchers, alternated trial by trial so that a change of load hits both alik
 ``uv run wott-hub run`` as the README types it (uv's own per-run work included: the lock and
 environment check, and a bytecode pass if ``compile-bytecode`` were set; docs/hub.md,
 "Start-up"), and the venv's ``wott-hub`` script (the hub's own start-up alone). The issue's
-target (TDs served <= 1.5 s) is on the first.
+target (TDs served <= 1.5 s) is on the first. Then the demo "at rest" (no client connected, its
+simulated devices playing their looping scenes): resident memory and CPU over ``REST_S``.
 """
 
 from __future__ import annotations
@@ -19,9 +20,10 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["LAUNCHERS", "TRIALS", "launch_command", "run", "startup_times", "summary"]
+__all__ = ["LAUNCHERS", "REST_S", "TRIALS", "at_rest", "launch_command", "run", "startup_times", "summary"]
 
 TRIALS = 3
+REST_S = 20.0
 ROOT = Path(__file__).resolve().parents[2]  # the workspace: what `uv run` finds from the checkout
 LAUNCHERS = ("uv run", "venv script")
 
@@ -39,15 +41,19 @@ def launch_command(launcher: str) -> list[str]:
     raise ValueError(f"unknown launcher {launcher!r}")
 
 
-def _one(cmd: list[str]) -> tuple[float, float, int]:
+def _ports() -> tuple[int, int]:
     import socket
-
-    import httpx
 
     with socket.socket() as a, socket.socket() as b:
         a.bind(("127.0.0.1", 0))
         b.bind(("127.0.0.1", 0))
-        port, ws_port = a.getsockname()[1], b.getsockname()[1]
+        return a.getsockname()[1], b.getsockname()[1]
+
+
+def _one(cmd: list[str]) -> tuple[float, float, int]:
+    import httpx
+
+    port, ws_port = _ports()
     with tempfile.TemporaryDirectory() as cwd:
         t0 = time.monotonic()
         proc = subprocess.Popen([*cmd, "run", "--port", str(port), "--ws-port", str(ws_port), "--json"],
@@ -85,6 +91,36 @@ def summary(trials: dict[str, list]) -> dict[str, tuple[float, float]]:
             for name, rows in trials.items()}
 
 
+def at_rest(seconds: float = REST_S) -> dict[str, float]:
+    """The demo (venv script, so the process measured is the hub) once ready and settled for 5 s:
+    its CPU over ``seconds`` (% of one core) and its resident memory (MiB) at the end."""
+    port, ws_port = _ports()
+    with tempfile.TemporaryDirectory() as cwd:
+        proc = subprocess.Popen([*launch_command("venv script"), "run", "--port", str(port), "--ws-port",
+                                 str(ws_port), "--json"], cwd=cwd, stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL, text=True)
+        try:
+            assert proc.stdout is not None
+            proc.stdout.readline()  # the --json line: ready
+            time.sleep(5.0)
+            cpu0, t0 = _cpu_s(proc.pid), time.monotonic()
+            time.sleep(seconds)
+            cpu1, t1 = _cpu_s(proc.pid), time.monotonic()
+            status = Path(f"/proc/{proc.pid}/status").read_text()
+        finally:
+            proc.terminate()
+            proc.wait(30)
+    kib = {k: int(v.split()[0]) for k, v in (line.split(":", 1) for line in status.splitlines())
+           if k in ("VmRSS", "VmHWM")}
+    return {"cpu_pct": 100 * (cpu1 - cpu0) / (t1 - t0), "rss_mib": kib["VmRSS"] / 1024,
+            "peak_mib": kib["VmHWM"] / 1024, "seconds": seconds}
+
+
+def _cpu_s(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
+
+
 async def run() -> dict:
     print("startup ...", flush=True)
-    return {"trials": startup_times(TRIALS), "load": os.getloadavg()}
+    return {"trials": startup_times(TRIALS), "rest": at_rest(), "load": os.getloadavg()}

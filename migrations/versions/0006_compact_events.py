@@ -24,7 +24,8 @@ from __future__ import annotations
 import sqlalchemy as sa
 from alembic import op
 
-from wott_hub.history.codec import decode, encode
+from wott_hub.events.record import Record
+from wott_hub.history.codec import decode_many, encode_records
 
 revision = "0006"
 down_revision = "0005"
@@ -48,12 +49,11 @@ def _convert(bind, pack: bool) -> None:
         if not rows:
             return
         last = rows[-1][0]
-        out = []
-        for id_, t_ns, data in rows:
-            text = decode(data, t_ns)
-            stored = encode(0, SKIN, t_ns, text) if pack else text.encode()
-            if stored != (data.encode() if isinstance(data, str) else bytes(data)):
-                out.append({"i": id_, "d": stored})
+        texts = decode_many([data for _, _, data in rows], [t_ns for _, t_ns, _ in rows])
+        recs = [Record("", 0, 0, SKIN, t_ns, text) for (_, t_ns, _), text in zip(rows, texts, strict=True)]
+        stored = encode_records(recs) if pack else [text.encode() for text in texts]
+        out = [{"i": id_, "d": new} for (id_, _, data), new in zip(rows, stored, strict=True)
+               if new != (data.encode() if isinstance(data, str) else bytes(data))]
         if out:
             bind.execute(sa.text("UPDATE events SET data = :d WHERE id = :i")
                          .bindparams(sa.bindparam("d", type_=sa.LargeBinary)), out)

@@ -167,3 +167,115 @@ def test_odd_packets_that_look_like_the_pipelines_come_back_exactly():
     for text in odd:
         assert decode(encode(0, SKIN, 5, text), 5) == text
     assert encode(0, SKIN, 5, odd[-1])[0] == PACKED  # beyond the tables: computed, still packed
+
+
+# --- packing from the pipeline's arrays (Record.skin): the same bytes as from the text, and the
+# text back whatever the arrays hold
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from wott_hub.events.record import SkinArrays  # noqa: E402
+from wott_hub.history.codec import decode_many, encode_records  # noqa: E402
+from wott_hub.hub import skin_deformed_json  # noqa: E402
+from wott_hub.tactile.processing import FrameResult  # noqa: E402
+
+
+def _pipeline_record(seq: int, t_ns: int, ids, intensity, *, same_time: bool = True) -> Record:
+    """A skin record as the pipeline publishes it: the text of ``skin_deformed_json``, the arrays."""
+    ids = np.asarray(ids, np.int64)
+    intensity = np.asarray(intensity, np.float64)
+    text = skin_deformed_json(FrameResult(t_ns, ids, intensity, False, [], [], True))
+    return Record("pad", seq, KIND_EVENT, SKIN, t_ns if same_time else t_ns + 7, text,
+                  skin=SkinArrays(ids, intensity))
+
+
+_GAPPY_IDS = st.lists(st.one_of(st.integers(0, 300), st.integers(0, 2**32 + 9)), max_size=60,
+                      unique=True).map(sorted)  # small gaps, gaps > 255, ids beyond uint32
+_INTENSITY = st.one_of(
+    st.integers(0, 3000).map(lambda k: round(k / 1000, 3)),  # the processor's µm, in the tables
+    st.integers(65_000, 70_000).map(lambda k: round(k / 1000, 3)),  # 65.535 mm and beyond uint16
+    st.floats(0, 100, allow_nan=False),  # not a whole number of µm
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(packets=st.lists(st.tuples(_GAPPY_IDS, st.data(), st.integers(0, 2**63 - 8), st.booleans()),
+                        max_size=12))
+def test_packets_packed_from_arrays_come_back_exactly_and_as_packed_from_text(packets):
+    recs = []
+    for seq, (ids, data, t, same_time) in enumerate(packets):
+        values = data.draw(st.lists(_INTENSITY, min_size=len(ids), max_size=len(ids)))
+        recs.append(_pipeline_record(seq, t, ids, values, same_time=same_time))
+    stored = encode_records(recs)
+    assert decode_many(stored, [r.t_ns for r in recs]) == [r.data for r in recs]
+    # the arrays give the bytes the text gives: one stored format, whichever the writer had
+    assert stored == [encode(r.kind, r.name, r.t_ns, r.data) for r in recs]
+    for r, s in zip(recs, stored, strict=True):
+        fits = (not len(r.skin.ids) or r.skin.ids.max() <= 0xFFFFFFFF) and all(
+            round(v * 1000) / 1000 == v <= 65.535 for v in r.skin.intensity.tolist())  # whole µm, uint16
+        assert (s[0] == PACKED) == fits, r.data
+
+
+def test_release_and_empty_packets_are_packed_from_their_arrays():
+    recs = [_pipeline_record(1, 10**18, [], []),  # nothing deformed
+            _pipeline_record(2, 10**18 + 1, [4, 5, 900], [0.0, 0.0, 0.0]),  # the final all-zero packet
+            _pipeline_record(3, 10**18 + 2, list(range(40_000, 40_000 + 300, 3)), [65.535] * 100)]
+    stored = encode_records(recs)
+    assert [s[0] for s in stored] == [PACKED] * 3
+    assert [decode(s, r.t_ns) for s, r in zip(stored, recs, strict=True)] == [r.data for r in recs]
+
+
+def test_arrays_that_do_not_give_the_text_back_fall_back_to_the_text():
+    good = _pipeline_record(1, 10**18, [1, 2, 3], [0.5, 0.25, 1.0])
+    other = [
+        SkinArrays(np.array([1, 2, 4]), np.array([0.5, 0.25, 1.0])),  # another id
+        SkinArrays(np.array([1, 2, 3]), np.array([0.5, 0.25, 1.001])),  # another intensity
+        SkinArrays(np.array([1, 2]), np.array([0.5, 0.25])),  # fewer nodes
+        SkinArrays(np.array([1, 2, 3]), np.array([0.5, np.nan, 1.0])),
+        SkinArrays(np.array([-1, 2, 3]), np.array([0.5, 0.25, 1.0])),
+        SkinArrays(np.array([[1, 2, 3]] * 3), np.array([[0.5, 0.25, 1.0]] * 3)),  # not what NumPy can join
+        SkinArrays(np.array([1, 2, 3], dtype=object), np.array([0.5, 0.25, 1.0])),
+        SkinArrays([1, 2, 3], [0.5, 0.25, 1.0]),  # type: ignore[arg-type]  # lists, not arrays
+    ]
+    recs = [Record("pad", i, KIND_EVENT, SKIN, good.t_ns, good.data, skin=s) for i, s in enumerate(other)]
+    foreign = '{"timeStamp":1,"numOfDeformedNodes":1,"arrayOfDeformedNodes":[{"deformedNodeID":3,' \
+              '"deformedNodeIntensity":0.1234}]}'  # arrays of a text the pipeline could not have made
+    recs.append(Record("pad", 9, KIND_EVENT, SKIN, 1, foreign,
+                       skin=SkinArrays(np.array([3]), np.array([0.123]))))
+    stored = encode_records(recs)
+    # the text parser packs what the arrays could not (same bytes as the good record), or the text is kept
+    assert stored[:-1] == [encode_records([good])[0]] * len(other)
+    assert stored[-1] == foreign.encode()
+    assert decode_many(stored, [r.t_ns for r in recs]) == [r.data for r in recs]
+
+
+def test_decode_many_reads_every_stored_form_and_refuses_a_damaged_packet():
+    rec = _pipeline_record(1, 10**18, [7, 8], [0.5, 2.0])
+    packed = encode_records([rec])[0]
+    stored = [packed, memoryview(packed), rec.data, rec.data.encode(), memoryview(b'{"a":1}'), b""]
+    assert decode_many(stored, [rec.t_ns] * 6) == [rec.data] * 4 + ['{"a":1}', ""]
+    for damaged in (packed[:-1], packed + b"\0", packed[:2]):
+        with pytest.raises(ValueError, match="damaged"):
+            decode_many([damaged], [rec.t_ns])
+
+
+def test_the_writer_packs_the_pipelines_records_from_their_arrays(writer, reader):
+    start, n = register_device(writer, "pad")
+    rng = np.random.default_rng(3)
+    recs = []
+    for i in range(300):
+        ids = np.sort(rng.choice(n, size=int(rng.integers(0, 30)), replace=False))
+        recs.append(_pipeline_record(start + 1 + i, 10**18 + i * 8_333_333, ids,
+                                     np.round(rng.uniform(0.001, 3.0, len(ids)), 3)))
+        recs[-1].thing = "pad"
+    recs[5].skin = SkinArrays(recs[5].skin.ids + 1, recs[5].skin.intensity)  # wrong arrays: the text decides
+    writer.start()
+    for r in recs:
+        writer.submit(r)
+    assert writer.flush()
+    stored = [bytes(d) for _, d in _stored(writer.engine)]
+    assert all(d[0] == PACKED for d in stored)
+    assert stored == [encode(r.kind, r.name, r.t_ns, r.data) for r in recs]
+    got, _ = reader.rows("pad", start, recs[-1].seq, (KIND_EVENT, SKIN), 10_000)
+    assert [r.data for r in got] == [r.data for r in recs]

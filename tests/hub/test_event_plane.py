@@ -168,7 +168,8 @@ def test_frame_records_builds_only_what_is_wanted_and_the_worker_builds_everythi
     import numpy as np
 
     from wott_hub.examples import example_device
-    from wott_hub.hub.pipeline import ACTION, CONTACTS, SKIN_DEFORMED, DevicePipeline, skin_deformed_json
+    from wott_hub.hub.payloads import skin_deformed_json
+    from wott_hub.hub.pipeline import ACTION, CONTACTS, SKIN_DEFORMED, DevicePipeline
     from wott_hub.tactile import FrameProcessor, TactileFrame
     from wott_hub.tactile.indentation import Indenter, indent
 

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import asyncio
+import json
+import time
+
 import httpx
 
 from wott_hub.config import HubConfig
-from wott_hub.events.record import KIND_EVENT
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, SkinArrays
 from wott_hub.plugins import DeviceConfig
 from wott_hub.td.validate import validate_td
 
@@ -30,8 +34,126 @@ def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path,
         assert all(recorded[i] == d for i, d in got)
         ids = [i for i, _ in got]
         assert ids == [s for s in sorted(recorded) if ids[0] <= s <= ids[-1]]
+        skins = ht.call(lambda: [r for r in hub.plane.stream("pad").ring
+                                 if r.name == "skinDeformedDetection"])
+        assert skins and all(isinstance(r.skin, SkinArrays) for r in skins)  # its arrays crossed the pipe
+        for r in skins[-5:]:
+            nodes = json.loads(r.data)["arrayOfDeformedNodes"]
+            assert r.skin.ids.tolist() == [n["deformedNodeID"] for n in nodes]
+            assert r.skin.intensity.tolist() == [n["deformedNodeIntensity"] for n in nodes]
         health = httpx.get(f"{hub.td_url('hub')}/properties/health").json()
         assert health["devices"]["pad"]["frames"] > 0
     finally:
         ht.stop()
     assert not any(p.is_alive() for p in hub.pool.procs)  # the workers are gone
+
+
+# --- the pipe: records batched in the worker (Outbox), unpacked by the hub (WorkerPool) ----------------
+
+def _skin_record(sink, t_ns: int, ids: list[int], mm: list[float]) -> None:
+    import numpy as np
+
+    data = json.dumps({"timeStamp": t_ns, "numOfDeformedNodes": len(ids), "arrayOfDeformedNodes": [
+        {"deformedNodeID": i, "deformedNodeIntensity": v} for i, v in zip(ids, mm, strict=True)]},
+        separators=(",", ":"))
+    sink.publish(sink.thing, KIND_EVENT, "skinDeformedDetection", t_ns, data, None,
+                 SkinArrays(np.array(ids, np.intp), np.array(mm)))
+
+
+def _through_the_pipe(work, flush_s: float = 0.05):
+    """Run ``work(outbox, sinks)`` in a loop whose pipe ends in a ``WorkerPool`` reader: the messages
+    the hub's loop hands on, the number of pipe messages they came in, each batch's frame times."""
+    import multiprocessing as mp
+
+    from wott_hub.hub.workers import Outbox, PipeSink, WorkerPool
+
+    got: list[tuple] = []
+    batches: list[list[int]] = []  # the t_ns of each batch's frames
+    sent = [0]
+
+    class Counted:
+        """The worker's end of the pipe, counting the messages that cross it."""
+
+        def __init__(self, conn) -> None:
+            self.conn = conn
+
+        def send(self, msg) -> None:
+            sent[0] += 1
+            if msg[0] == "recs":
+                batches.append([recs[0][2] for _, recs in msg[1]])
+            self.conn.send(msg)
+
+    async def main() -> None:
+        hub_end, worker_end = mp.Pipe(duplex=True)
+        pool = WorkerPool(0, got.append)  # no process: this test's pipe stands for its worker
+        pool.conns.append(hub_end)
+        loop = asyncio.get_running_loop()
+        loop.add_reader(hub_end.fileno(), pool._readable, 0)
+        outbox = Outbox(Counted(worker_end), flush_s)
+        await work(outbox, {t: PipeSink(t, outbox) for t in ("a", "b")})
+        outbox.flush()
+        deadline = time.monotonic() + 5
+        while (not got or got[-1][0] != "end") and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        loop.remove_reader(hub_end.fileno())
+        hub_end.close()
+        worker_end.close()
+
+    asyncio.run(main())
+    return got, sent[0], batches
+
+
+def test_frames_of_all_devices_go_out_as_one_message_and_keep_their_order_and_arrays():
+    async def work(outbox, sinks):
+        for k in range(6):
+            sink = sinks["ab"[k % 2]]
+            _skin_record(sink, 1000 + k, [3, 7 + k], [0.5, 1.25])
+            sink.publish(sink.thing, KIND_PROPERTY, "contactInformation", 1000 + k, f'{{"k":{k}}}', {"in": k})
+            sink.frame_done()
+        outbox.send(("end",))
+
+    got, messages, _ = _through_the_pipe(work)
+    assert messages == 2  # six frames in one batch, flushed ahead of "end"
+    assert [m[:2] for m in got] == [("recs", "ab"[k % 2]) for k in range(6)] + [("end",)]
+    for k, (_, _, recs) in enumerate(got[:6]):
+        (kind, name, t_ns, data, trace, skin), contacts = recs
+        assert (kind, name, t_ns, trace) == (KIND_EVENT, "skinDeformedDetection", 1000 + k, None)
+        nodes = json.loads(data)["arrayOfDeformedNodes"]
+        assert skin.ids.tolist() == [n["deformedNodeID"] for n in nodes] == [3, 7 + k]
+        assert skin.intensity.tolist() == [n["deformedNodeIntensity"] for n in nodes]
+        assert contacts == (KIND_PROPERTY, "contactInformation", 1000 + k, f'{{"k":{k}}}', {"in": k}, None)
+
+
+def test_a_batch_waits_at_most_flush_s_even_while_the_loop_is_busy():
+    flush_s = 0.01
+
+    async def work(outbox, sinks):
+        sink = sinks["a"]
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 0.1:  # never yields: a loop tick running many devices
+            sink.publish("a", KIND_PROPERTY, "contactInformation", time.monotonic_ns(), "{}")
+            sink.frame_done()
+            time.sleep(0.001)
+        outbox.send(("end",))
+
+    got, messages, batches = _through_the_pipe(work, flush_s)
+    assert len(got) - 1 == sum(map(len, batches)) and len(batches) >= 4
+    slack = 0.002e9
+    for t in batches[:-1]:  # each went out with the first frame past flush_s after its first
+        assert t[-2] - t[0] < flush_s * 1e9 + slack and t[-1] - t[0] >= flush_s * 1e9 - slack
+
+
+def test_a_lone_frame_goes_out_on_the_next_loop_tick_not_after_flush_s():
+    async def work(outbox, sinks):
+        sink = sinks["b"]
+        sink.publish("b", KIND_PROPERTY, "contactInformation", 1, "{}")
+        sink.frame_done()
+        t0 = time.monotonic()
+        while outbox._frames:
+            await asyncio.sleep(0)
+        assert time.monotonic() - t0 < 0.5  # flush_s here is 5 s
+        outbox.send(("end",))
+
+    got, messages, _ = _through_the_pipe(work, flush_s=5.0)
+    assert messages == 2
+    assert got[0] == ("recs", "b", [(KIND_PROPERTY, "contactInformation", 1, "{}", None, None)])

@@ -14,6 +14,7 @@ import jsonschema
 from wott_hub.config import HubConfig
 from wott_hub.hub import Hub
 from wott_hub.mqtt import MqttConfig
+from wott_hub.servient import HUB_THING_ID
 from wott_hub.td.validate import validate_td
 
 EVENT = "skinDeformedDetection"
@@ -46,7 +47,9 @@ def test_events_and_property_changes_on_the_topics_of_the_td_forms(tmp_path, pre
                           "mqv:qos": "0", "contentType": "application/json"}
             assert prop["mqv:filter"] == f"{prefix}/properties/{CONTACTS}"
             assert prop["op"] == ["observeproperty", "unobserveproperty"]
-            assert prop["mqv:retain"] is True and prop["mqv:qos"] == "1"
+            assert prop["mqv:retain"] is True and prop["mqv:qos"] == "0"  # per frame: event_qos
+            health = mqtt_form(hub.server.things.get(HUB_THING_ID).td["properties"]["health"])
+            assert health["mqv:retain"] is True and health["mqv:qos"] == "1"
             action = mqtt_form(td["events"]["actionDetection"])
             assert action["mqv:qos"] == "1" and action["mqv:filter"] == f"{prefix}/events/actionDetection"
             assert "mqv:filter" not in json.dumps(td["properties"]["skinMaterial"])  # not observable: no form
@@ -131,6 +134,36 @@ def test_an_absent_broker_never_holds_the_hub_up(tmp_path, press_scene, broker_c
                 later.stop()
 
     run(scenario())
+
+
+def test_bursts_of_every_size_and_qos_arrive_whole_and_in_order_per_topic(tmp_path, broker, mqtt_reader, run,
+                                                                          wait_for):
+    """The publisher writes QoS 0 messages joined (its own PUBLISH encoding) and QoS 1 ones through
+    paho: sizes across each width of MQTT's remaining length and past one joined write."""
+    sizes = [1, 117, 118, 16_373, 16_374, 70_000, 2_097_142, 2_097_143, 300]  # "burst/e0": 10 header bytes
+    cfg = HubConfig(name="cell", http_port=0, ws_port=None, history=False, mqtt=MqttConfig(url=broker.url))
+
+    async def scenario() -> None:
+        async with Hub(cfg) as hub, mqtt_reader(broker.url, "burst/#") as reader:
+            await wait_for(lambda: hub.mqtt.connected, timeout=10, what="connected")
+            sent: dict[str, list[bytes]] = {}
+            for burst in range(4):  # each burst put at once: one batch of the publisher
+                for i in range(400):
+                    size = sizes[i % len(sizes)] if burst == 0 else 200 + i
+                    topic, qos = (f"burst/p{i % 2}", 1) if i % 5 == 0 else (f"burst/e{i % 3}", 0)
+                    payload = f"{burst}:{i}:".encode().ljust(size, b"x")
+                    sent.setdefault(topic, []).append(payload)
+                    hub.mqtt.put((topic, payload, qos, False))
+                total = sum(map(len, sent.values()))
+                await wait_for(lambda n=total: len(reader.messages) >= n, timeout=30,
+                               what=lambda n=total: f"{len(reader.messages)} of {n} messages")
+            got: dict[str, list[bytes]] = {}
+            for topic, payload, _ in reader.messages:
+                got.setdefault(topic, []).append(payload)
+            assert got == sent
+            assert hub.mqtt.dropped == 0
+
+    run(scenario(), timeout=120)
 
 
 def test_no_mqtt_without_its_table_and_no_mqtt_library_loaded(tmp_path):

@@ -100,7 +100,7 @@ def test_nothing_deformed_means_no_contact_search(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("contact search ran on a frame at rest")
 
-    monkeypatch.setattr(processing, "find_contacts", boom)
+    monkeypatch.setattr(processing.ContactFinder, "find", boom)
     proc = FrameProcessor(BARREL)
     r = proc.process(TactileFrame(0, np.zeros((707, 3))))
     assert r.contacts == [] and r.skin_deformed_detection() is None

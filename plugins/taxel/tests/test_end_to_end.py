@@ -137,18 +137,22 @@ def test_the_driver_survives_its_board_being_unplugged(tmp_path):
                                                                  "backoff_cap_s": 0.05}))
     driver = TaxelDriver(driver.description, shape=(4, 4), compliance=compliance, simulator=sim,
                          backoff=driver._backoff)
-    states = []
+    states = []  # every disconnected state the driver went through, in order (polling can miss one)
+    set_health = driver.set_health
+
+    def record(state, reason=""):
+        set_health(state, reason)
+        if state == Health.disconnected and (not states or states[-1].reason != reason):
+            states.append(driver.health())
+
+    driver.set_health = record
 
     async def unplug_and_replug():
         while driver.counters.frames < 20:
             await asyncio.sleep(0.005)
         sim.unplug()
-        while driver.health().state != Health.disconnected:
-            await asyncio.sleep(0.005)
-        states.append(driver.health())
         while not driver.health().reason.startswith("cannot open"):  # the path is gone: re-opens fail
             await asyncio.sleep(0.005)
-        states.append(driver.health())
         # the consumer must have every frame decoded before the unplug: the replugged board restarts
         # at seq 0 and its old ground truth is gone
         while len(pairs) < driver.counters.frames:
@@ -165,6 +169,7 @@ def test_the_driver_survives_its_board_being_unplugged(tmp_path):
 
     pairs = asyncio.run(main())
     assert states[0].reason.startswith("lost ") and states[1].reason.startswith("cannot open ")
+    assert all(st.state == Health.disconnected for st in states)
     assert driver.counters.reconnects == 1 and driver.counters.bad_crc == 0
     worst = max(float(np.abs(f.displacement - truth).max()) for f, truth in pairs)
     assert worst <= compliance.quantum_mm / 2 + 1e-12

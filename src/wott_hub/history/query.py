@@ -11,9 +11,8 @@ import sqlalchemy as sa
 
 from wott_hub.errors import NotFound
 
-from .codec import decode
 from .models import EventRow
-from .reader import HistoryReader
+from .reader import HistoryReader, decode_rows
 
 __all__ = ["record_page"]
 
@@ -45,4 +44,4 @@ def record_page(reader: HistoryReader, thing: str, *, t_from_ns: int | None = No
             rows = conn.execute(q).all()
     except sa.exc.DBAPIError as e:
         raise reader._failed(e) from None
-    return [(s, t, k, n, decode(d, t)) for s, t, k, n, d in rows]
+    return decode_rows(rows)

@@ -48,7 +48,7 @@ from sqlalchemy.engine import Engine
 from wott_hub.errors import Conflict, InvalidInput
 from wott_hub.events.record import Record
 
-from .codec import encode as encode_data
+from .codec import encode_records
 from .db import HistoryError, check_integrity, describe
 from .lease import DEFAULT_HUB_ID, LEASE_STALE_S, Lease, live_holder
 from .models import EventRow, ThingRow
@@ -427,11 +427,9 @@ class HistoryWriter:
         t0 = time.perf_counter()
         keys = self.keys
         try:
-            if self.compact:
-                rows = [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name,
-                         encode_data(r.kind, r.name, r.t_ns, r.data)) for r in batch]
-            else:
-                rows = [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, r.data.encode()) for r in batch]
+            data = encode_records(batch) if self.compact else [r.data.encode() for r in batch]
+            rows = [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, d)
+                    for r, d in zip(batch, data, strict=True)]
         except KeyError as e:
             raise _Refused(f"Thing {e.args[0]!r} was never registered with the history writer") from None
         tops: dict[str, int] = {}

@@ -6,7 +6,8 @@ its modules are internal and never import this one (tests/test_architecture.py).
 
 from .devices import DeviceRuntime
 from .lifecycle import Hub
-from .pipeline import DevicePipeline, RecordSink, skin_deformed_json
+from .payloads import skin_deformed_json
+from .pipeline import DevicePipeline, RecordSink
 from .replay import ReplayRuntime
 from .serve import serve
 

@@ -9,12 +9,22 @@ its ``DevicePipeline`` into a ``PipeSink`` that sends the records, already
 JSON-encoded, to the hub over a pipe; the hub's loop only numbers, records and
 fans them out. The hub sees such a device through a ``WorkerDevice`` proxy.
 
+A worker batches its records: the frames its devices made in one loop tick go out together
+(``Outbox``), in one message the hub reads in one go; a tick longer than ``FLUSH_S`` sends
+its batch once its first frame has waited that long. One message per frame cost each side a
+pickle, a write or read and a wake-up per frame (~55 µs of the worker's time and ~70 µs of the
+hub's at 32 devices x 120 Hz; batched, ~30 µs each). Any other message flushes the waiting
+records first: a device's records, and its ``ended``, a health report or an ``acted`` after
+them, keep their order.
+
 Protocol (pickled tuples on a ``multiprocessing`` pipe):
 
 - hub -> worker: ``("open", DeviceConfig)``, ``("run", id, trace)``, ``("close_device", id)``,
   ``("act", id, request, action)``, ``("close",)``
 - worker -> hub: ``("opened", id, DeviceDescription, family, capabilities)``, ``("failed", id, message)``,
-  ``("recs", id, [(kind, name, t_ns, data, trace), ...])``,
+  ``("recs", [(id, [(kind, name, t_ns, data, trace, skin), ...]), ...])`` (one entry per frame, in
+  the order they were made; ``skin``: None or a ``SkinArrays`` as (int64 ids, float64 intensity)
+  bytes, ``_skin_to_wire``; the hub hands each frame on as ``("recs", id, records)`` with a ``SkinArrays``),
   ``("health", {id: (state, reason, frames, frame_errors, restarts)})``, ``("ended", id, reason)``,
   ``("acted", request, detail, error, report)``
 
@@ -43,6 +53,8 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from wott_hub import errors
 from wott_hub.drivers.base import Health, HealthStatus
 from wott_hub.errors import DriverError, WottHubError
@@ -57,7 +69,8 @@ if TYPE_CHECKING:
 
     from wott_hub.plugins.model import DeviceConfig
 
-__all__ = ["ACTION_TIMEOUT_S", "RESTART_TIMEOUT_S", "PipeSink", "WorkerDevice", "WorkerPool", "worker_main"]
+__all__ = ["ACTION_TIMEOUT_S", "FLUSH_S", "RESTART_TIMEOUT_S", "Outbox", "PipeSink", "WorkerDevice",
+           "WorkerPool", "worker_main"]
 
 log = logging.getLogger("wott_hub.hub")
 
@@ -66,6 +79,10 @@ ACTION_TIMEOUT_S = 10.0
 
 RESTART_TIMEOUT_S = 60.0
 """... and ``restart`` (closing and opening a driver: a camera, a serial port, a model to load)."""
+
+FLUSH_S = 0.001
+"""How long a frame's records wait at most for the others of their batch while the worker's loop is
+busy (``Outbox``): the latency a batch adds, against the per-message cost it saves."""
 
 Report = tuple[str, str, int, int, int]
 """A pipeline's health as a worker reports it: (state, reason, frames, frame_errors, restarts)."""
@@ -195,7 +212,12 @@ class WorkerPool:
                 self.on_message(("worker_exit", worker))
                 return
             kind = msg[0]
-            if kind == "acted":
+            if kind == "recs":
+                on_message = self.on_message
+                for thing, recs in msg[1]:
+                    on_message(("recs", thing, [r if r[5] is None else (*r[:5], _skin_from_wire(r[5]))
+                                                for r in recs]))
+            elif kind == "acted":
                 self._answered(msg)
             elif kind == "opened":
                 fut = self._pending.pop(msg[1], None)
@@ -225,15 +247,70 @@ class WorkerPool:
 
 # --- the worker process ---------------------------------------------------------------
 
+def _skin_to_wire(skin: SkinArrays) -> tuple[bytes, bytes]:
+    """A skin's arrays as raw bytes: pickling two ndarrays costs ~4x more on each side."""
+    return (skin.ids.astype(np.int64, copy=False).tobytes(),
+            skin.intensity.astype(np.float64, copy=False).tobytes())
+
+
+def _skin_from_wire(wire: tuple[bytes, bytes]) -> SkinArrays:
+    return SkinArrays(np.frombuffer(wire[0], np.int64), np.frombuffer(wire[1], np.float64))
+
+
+class Outbox:
+    """The worker's side of the pipe: records of every device batched, everything else in order after them.
+
+    A batch goes out on the next loop tick, with the frames of every device that ran
+    in this one, or as soon as a frame finds its first one ``flush_s`` old (a tick
+    running many devices can take longer than that). No timer: a worker woken to send
+    waits for a core on a loaded host. ``send`` flushes first.
+    """
+
+    __slots__ = ("_conn", "_first", "_frames", "_handle", "_loop", "flush_s")
+
+    def __init__(self, conn: mp.connection.Connection, flush_s: float = FLUSH_S) -> None:
+        self._conn = conn
+        self._loop = asyncio.get_running_loop()
+        self._frames: list[tuple[str, list[tuple[Any, ...]]]] = []
+        self._handle: asyncio.Handle | None = None
+        self._first = 0.0  # when the first frame of the batch came
+        self.flush_s = flush_s
+
+    def frame(self, thing: str, recs: list[tuple[Any, ...]]) -> None:
+        """One frame's records of device ``thing``, sent with the next batch."""
+        self._frames.append((thing, recs))
+        if self._handle is None:
+            self._first = time.monotonic()
+            self._handle = self._loop.call_soon(self.flush)
+        elif time.monotonic() - self._first >= self.flush_s:
+            self.flush()
+
+    def flush(self) -> None:
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
+        if self._frames:
+            frames, self._frames = self._frames, []
+            self._put(("recs", frames))
+
+    def send(self, msg: tuple[Any, ...]) -> None:
+        self.flush()
+        self._put(msg)
+
+    def _put(self, msg: tuple[Any, ...]) -> None:
+        with contextlib.suppress(OSError, ValueError):  # the hub has gone: it will tell us to close, or not
+            self._conn.send(msg)
+
+
 class PipeSink:
     """The record sink of a pipeline in a worker: it wants every record (only the hub knows who
-    wants one) and sends each frame's records to the hub as one message."""
+    wants one) and hands each frame's records to the worker's ``Outbox``."""
 
-    __slots__ = ("_recs", "_send", "thing")
+    __slots__ = ("_outbox", "_recs", "thing")
 
-    def __init__(self, thing: str, send: Callable[[tuple[Any, ...]], None]) -> None:
+    def __init__(self, thing: str, outbox: Outbox) -> None:
         self.thing = thing
-        self._send = send
+        self._outbox = outbox
         self._recs: list[tuple[Any, ...]] = []
 
     def wants(self, _thing: str, _kind: int, _name: str) -> bool:
@@ -241,11 +318,11 @@ class PipeSink:
 
     def publish(self, _thing: str, kind: int, name: str, t_ns: int, data: str,
                 trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> None:
-        self._recs.append((kind, name, t_ns, data, trace))
+        self._recs.append((kind, name, t_ns, data, trace, None if skin is None else _skin_to_wire(skin)))
 
     def frame_done(self) -> None:
         if self._recs:
-            self._send(("recs", self.thing, self._recs))
+            self._outbox.frame(self.thing, self._recs)
             self._recs = []
 
 
@@ -289,16 +366,13 @@ async def _worker(conn: mp.connection.Connection) -> None:
     loop.add_reader(conn.fileno(), readable)
     devices: dict[str, _Running] = {}
     acting: set[asyncio.Task[None]] = set()
-
-    def send(msg: tuple[Any, ...]) -> None:
-        with contextlib.suppress(OSError, ValueError):
-            conn.send(msg)
+    out = Outbox(conn)
 
     async def health() -> None:
         guard = Guard("worker health report", logger=log)  # the loop outlives any one report
         while True:
             await asyncio.sleep(1.0)
-            guard.call("report", lambda: send(("health", {did: d.pipeline.report()
+            guard.call("report", lambda: out.send(("health", {did: d.pipeline.report()
                                                           for did, d in list(devices.items())})))
 
     health_task = asyncio.create_task(health())
@@ -313,16 +387,16 @@ async def _worker(conn: mp.connection.Connection) -> None:
                     desc = driver.description
                     processor = FrameProcessor(desc.mesh, processing_params(desc))
                     devices[cfg.id] = _Running(cfg, DevicePipeline(cfg.id, driver, processor))
-                    send(("opened", cfg.id, desc, cfg.family, driver_capabilities(driver)))
+                    out.send(("opened", cfg.id, desc, cfg.family, driver_capabilities(driver)))
                 except Exception as e:  # a DriverError (or a processor refusing the mesh): the hub reports it
-                    send(("failed", cfg.id, str(e)))
+                    out.send(("failed", cfg.id, str(e)))
             elif kind == "run":
                 d = devices.get(msg[1])
                 if d is not None and d.task is None:
                     d.trace = msg[2]
-                    d.task = asyncio.create_task(_run(d.pipeline, d.trace, send))
+                    d.task = asyncio.create_task(_run(d.pipeline, d.trace, out))
             elif kind == "act":  # a task: a restart must not hold up the other devices' messages
-                task = asyncio.create_task(_act(devices, msg[1], msg[2], msg[3], send))
+                task = asyncio.create_task(_act(devices, msg[1], msg[2], msg[3], out))
                 acting.add(task)
                 task.add_done_callback(acting.discard)
             elif kind == "close_device":
@@ -337,6 +411,7 @@ async def _worker(conn: mp.connection.Connection) -> None:
             t.cancel()
         for d in devices.values():
             await _close(d)
+        out.flush()  # the records made before the close
 
 
 async def _close(d: _Running) -> None:
@@ -348,16 +423,16 @@ async def _close(d: _Running) -> None:
     await d.pipeline.close()
 
 
-async def _run(pipeline: DevicePipeline, trace: bool, send: Callable[[tuple[Any, ...]], None]) -> None:
-    sink = PipeSink(pipeline.thing, send)
+async def _run(pipeline: DevicePipeline, trace: bool, out: Outbox) -> None:
+    sink = PipeSink(pipeline.thing, out)
     await pipeline.run(sink, trace=trace, frame_done=sink.frame_done)
-    send(("ended", pipeline.thing, pipeline.reason))
+    out.send(("ended", pipeline.thing, pipeline.reason))
 
 
 # --- device actions in the worker (the hub's side: hub.device_actions) ----------------------
 
 async def _act(devices: dict[str, _Running], device_id: str, req: int, action: str,
-               send: Callable[[tuple[Any, ...]], None]) -> None:
+               out: Outbox) -> None:
     """Do ``action`` on ``device_id`` and answer ``("acted", req, detail, error, report)``."""
     d = devices.get(device_id)
     detail, error = "", None
@@ -365,7 +440,7 @@ async def _act(devices: dict[str, _Running], device_id: str, req: int, action: s
         if d is None:
             raise errors.NotFound(f"no device {device_id!r} in this worker process")
         if action == "restart":
-            detail = await _restart(devices, d, send)
+            detail = await _restart(devices, d, out)
         else:
             detail = d.pipeline.request(action)
     except WottHubError as e:
@@ -373,10 +448,10 @@ async def _act(devices: dict[str, _Running], device_id: str, req: int, action: s
     except Exception as e:  # a bug here must still answer, or the hub waits for its timeout
         log.exception("device %s: %s", device_id, action)
         error = ("DriverError", f"device {device_id!r}: {action} raised {type(e).__name__}: {e}")
-    send(("acted", req, detail, error, d.pipeline.report() if d is not None else None))
+    out.send(("acted", req, detail, error, d.pipeline.report() if d is not None else None))
 
 
-async def _restart(devices: dict[str, _Running], d: _Running, send: Callable[[tuple[Any, ...]], None]) -> str:
+async def _restart(devices: dict[str, _Running], d: _Running, out: Outbox) -> str:
     """The in-process restart (``DeviceActions.restart``) where the driver is: same pipeline, new driver."""
     if d.restarting:
         raise errors.Conflict(f"device {d.cfg.id!r} is being restarted already")
@@ -396,16 +471,16 @@ async def _restart(devices: dict[str, _Running], d: _Running, send: Callable[[tu
             driver = await open_driver(d.cfg)
         except DriverError as e:
             d.pipeline.state, d.pipeline.reason = "failed", str(e)
-            d.reopening = asyncio.create_task(_reopen(devices, d, str(e), send))
+            d.reopening = asyncio.create_task(_reopen(devices, d, str(e), out))
             raise
-        await _resume(devices, d, driver, send)
+        await _resume(devices, d, driver, out)
     finally:
         d.restarting = False
     return "driver closed and opened again; the stream continues"
 
 
 async def _resume(devices: dict[str, _Running], d: _Running, driver: Any,
-                  send: Callable[[tuple[Any, ...]], None]) -> None:
+                  out: Outbox) -> None:
     """Run ``d`` on ``driver``; one with another mesh than the served one is closed (``failed``, Conflict)."""
     try:
         d.pipeline.reopened(driver)
@@ -415,11 +490,11 @@ async def _resume(devices: dict[str, _Running], d: _Running, driver: Any,
         d.pipeline.state, d.pipeline.reason = "failed", str(e)
         raise
     if devices.get(d.cfg.id) is d:
-        d.task = asyncio.create_task(_run(d.pipeline, d.trace, send))
+        d.task = asyncio.create_task(_run(d.pipeline, d.trace, out))
 
 
 async def _reopen(devices: dict[str, _Running], d: _Running, reason: str,
-                  send: Callable[[tuple[Any, ...]], None]) -> None:
+                  out: Outbox) -> None:
     """Open ``d`` again with the pipeline's backoff until it opens or is closed (as in the hub's process)."""
     backoff = restart_backoff()
     while True:
@@ -435,6 +510,6 @@ async def _reopen(devices: dict[str, _Running], d: _Running, reason: str,
             await driver.close()
             return
         with contextlib.suppress(errors.Conflict):  # failed, with the reason
-            await _resume(devices, d, driver, send)
+            await _resume(devices, d, driver, out)
         d.reopening = None
         return

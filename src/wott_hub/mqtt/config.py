@@ -32,7 +32,8 @@ class MqttConfig:
         "Topic prefix; default wott/<hub id>. Topics: <prefix>/<thing>/events/<name>, "
         "<prefix>/<thing>/properties/<name>, <prefix>/<thing>/td."))
     event_qos: Qos = field(default=0, metadata=doc(
-        "QoS of high-rate events (skinDeformedDetection); other events and the TDs use 1."))
+        "QoS of what changes every frame: the skinDeformedDetection event and the "
+        "contactInformation property (retained); other events, properties and the TDs use 1."))
     queue_max: QueueMax = field(default=100_000, metadata=doc(
         "Messages waiting for the broker at most; beyond, the oldest are dropped and counted "
         "(a slow or absent broker never slows the hub)."))

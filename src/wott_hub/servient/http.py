@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import json
 import time
+from asyncio import Future
 from typing import Any
 
 import tornado.web
 from tornado.http1connection import HTTP1Connection
-from tornado.httputil import HTTPServerRequest
+from tornado.httputil import HTTPConnection, HTTPServerRequest
 from tornado.iostream import IOStream, StreamClosedError
 
 from wott_hub.errors import WottHubError, http_status
@@ -171,24 +172,32 @@ class _StreamHandler(_Base):
                 await self._long_poll(sub)
                 return
             # Nagle + delayed ACK would hold small event frames back by up to 40 ms
-            _iostream(self.request).set_nodelay(True)
+            stream = _iostream(self.request)
+            stream.set_nodelay(True)
             self.set_header("Content-Type", "text/event-stream; charset=utf-8")
             self.set_header("Cache-Control", "no-cache")
             self.set_header("X-Accel-Buffering", "no")
             self.write(b": stream open\n\n")  # headers out now; comments are ignored by clients
             await self.flush()
             self._last_write = time.monotonic()
+            conn = self.request.connection
+            assert conn is not None
             async for batch in sub.batches():
                 if sub.gap is not None:
-                    self.write(f": gap: records after {sub.gap[0]} before {sub.gap[1]} are not "
+                    conn.write(f": gap: records after {sub.gap[0]} before {sub.gap[1]} are not "
                                f"recorded\n\n".encode())
                     sub.gap = None
                 if batch[0].trace is None:
-                    self.write(b"".join([r.sse(named) for r in batch]))
+                    sent = conn.write(b"".join([r.sse(named) for r in batch]))
                 else:
-                    self._write_traced(batch, named)
+                    sent = self._write_traced(conn, batch, named)
                 self._last_write = time.monotonic()
-                await self.flush()
+                # Straight to the connection (it frames the chunk), not RequestHandler.flush, and
+                # wait only while the socket is backed up: per record that saves a future, a
+                # done-callback and a task wake-up on the hub's loop (docs/hub.md). A slow
+                # client still holds this loop back, and the subscriber's max_pending cuts it off.
+                if stream.writing():
+                    await sent
         except StreamClosedError:
             pass
         except WottHubError as e:  # history failed mid-resume: say so, never end in silence
@@ -201,13 +210,15 @@ class _StreamHandler(_Base):
         if not self._finished and not _iostream(self.request).closed():
             self.finish()
 
-    def _write_traced(self, batch: list[Record], named: bool) -> None:
+    @staticmethod
+    def _write_traced(conn: HTTPConnection, batch: list[Record], named: bool) -> Future[None]:
         """Benchmarks only: stamp when each record was handed to the socket layer."""
-        self.write(b"".join([r.sse(named) for r in batch]))
+        sent = conn.write(b"".join([r.sse(named) for r in batch]))
         t = time.perf_counter_ns()
         for r in batch:
             if r.trace is not None:
                 r.trace["sse"] = t
+        return sent
 
     async def _long_poll(self, sub: Subscriber) -> None:
         async for batch in sub.batches():

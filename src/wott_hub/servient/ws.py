@@ -283,11 +283,12 @@ class FastWebsocketHandler(WebsocketHandler):
                 if getattr(conn, "_compressor", None) is None:
                     frames = b"".join([_text_frame((head + r.data + tail).encode()) for r in batch])
                     fut = conn.stream.write(frames)
+                    if conn.stream.writing():  # back-pressure: wait only while the socket is backed up
+                        await fut  # (not per batch: a future wake-up per record, as for SSE)
                 else:
-                    fut = None
                     for r in batch:
                         fut = self.write_message(head + r.data + tail)
-                await fut  # back-pressure: the next batch waits for the socket
+                    await fut  # back-pressure: the next batch waits for the socket
         except (WebSocketClosedError, StreamClosedError):
             pass
         finally:

@@ -30,6 +30,7 @@ payload only when someone listens (``FrameResult.action_details``).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,9 +81,27 @@ def _confidence(value: float, threshold: float) -> float:
     return min(1.0, 0.5 + 0.5 * abs(value - threshold) / threshold)
 
 
-def _norm(v: np.ndarray) -> float:
-    """Length of a 3-vector: np.linalg.norm's generality costs more than the sum itself here."""
-    return math.sqrt(float(v @ v))
+Point = tuple[float, float, float]
+
+
+def _dist(a: Sequence[float], b: Sequence[float]) -> float:
+    """|a - b| of two 3-vectors as Python floats: the sum ``(a - b) @ (a - b)`` does for three numbers
+    (in order, no fused multiply-add), without a dozen microseconds of array calls a frame."""
+    x, y, z = a[0] - b[0], a[1] - b[1], a[2] - b[2]
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def _xyz(v: np.ndarray) -> Point:
+    x, y, z = v.tolist()
+    return x, y, z
+
+
+_ORIGIN: Point = (0.0, 0.0, 0.0)
+
+
+def _along(a: Point, b: Point, u: Sequence[float]) -> float:
+    """(a - b) @ u, summed in order like the three-number dot product."""
+    return (a[0] - b[0]) * u[0] + (a[1] - b[1]) * u[1] + (a[2] - b[2]) * u[2]
 
 
 class ActionDetector:
@@ -93,14 +112,14 @@ class ActionDetector:
         self._onset_ns: int | None = None
         self._last_rest_ns: int | None = None
         self._prev_ns: int | None = None
-        self._anchor: np.ndarray | None = None
-        self._prev_loc: np.ndarray | None = None
+        self._anchor: Point | None = None
+        self._prev_loc: Point | None = None
         self._still_since: int | None = None
         self._slipping = False
         self._pressed = False
         self._pinch_d0: float | None = None
-        self._pinch_start: tuple[np.ndarray, np.ndarray] | None = None  # both fingers where they appeared
-        self._pinch_prev: tuple[np.ndarray, np.ndarray] | None = None
+        self._pinch_start: tuple[Point, Point] | None = None  # both fingers where they appeared
+        self._pinch_prev: tuple[Point, Point] | None = None
         self._pinched = False
         self._speed = 0.0
         self._moved = 0.0
@@ -150,17 +169,19 @@ class ActionDetector:
             self._speed = main.peak / dt if dt is not None and dt > 0 else 0.0
             fast = self._speed > p.collision_speed_mm_s
             out.append("collision" if fast else "touch")
-            self._anchor = self._prev_loc = main.location
+            self._anchor = self._prev_loc = _xyz(main.location)
             self._still_since = t_ns
         else:
+            assert self._prev_loc is not None and self._anchor is not None  # set at the touch
+            loc = _xyz(main.location)
             dt = max((t_ns - (self._prev_ns or t_ns)) / 1e9, 1e-9)
-            speed = self._speed = _norm(main.location - self._prev_loc) / dt
+            speed = self._speed = _dist(loc, self._prev_loc) / dt
             if speed > p.rest_speed_mm_s:
                 self._still_since = None
             elif self._still_since is None:
                 self._still_since = t_ns
-            moved = self._moved = _norm(main.location - self._anchor)
-            sheared = _norm(main.shear) > p.slip_shear_ratio * max(main.depth, 1e-9)
+            moved = self._moved = _dist(loc, self._anchor)
+            sheared = _dist(_xyz(main.shear), _ORIGIN) > p.slip_shear_ratio * max(main.depth, 1e-9)
             if not self._slipping and (moved > p.slip_mm or sheared):
                 out.append("slip")
                 self._slipping = True
@@ -168,7 +189,7 @@ class ActionDetector:
                 (t_ns - self._still_since) / 1e9 >= p.press_s
             ):
                 self._slipping = False  # settled again: a new slide is a new slip
-                self._anchor = main.location
+                self._anchor = loc
             if (
                 not self._pressed
                 and not self._slipping
@@ -176,7 +197,7 @@ class ActionDetector:
             ):
                 out.append("press")
                 self._pressed = True
-            self._prev_loc = main.location
+            self._prev_loc = loc
         self._update_pinch(contacts, out)
         self._prev_ns = t_ns
         return out
@@ -186,23 +207,24 @@ class ActionDetector:
         if len(contacts) < 2 or contacts[1].peak < p.pinch_peak_ratio * contacts[0].peak:
             self._pinch_d0 = self._pinch_start = self._pinch_prev = None
             return
-        a, b = contacts[0].location, contacts[1].location
+        a, b = _xyz(contacts[0].location), _xyz(contacts[1].location)
         prev = self._pinch_prev
         if prev is not None:
-            if _norm(a - prev[1]) + _norm(b - prev[0]) < _norm(a - prev[0]) + _norm(b - prev[1]):
+            if _dist(a, prev[1]) + _dist(b, prev[0]) < _dist(a, prev[0]) + _dist(b, prev[1]):
                 a, b = b, a  # the same two fingers, listed the other way round
-            if max(_norm(a - prev[0]), _norm(b - prev[1])) > p.pinch_jump_mm:
+            if max(_dist(a, prev[0]), _dist(b, prev[1])) > p.pinch_jump_mm:
                 prev = None  # another contact took a finger's place: a new pair
         self._pinch_prev = (a, b)
-        d = _norm(a - b)
+        d = _dist(a, b)
         if prev is None or self._pinch_d0 is None or self._pinch_start is None:
             self._pinch_d0, self._pinch_start = d, (a, b)
             return
         if self._pinched or self._pinch_d0 - d <= p.pinch_mm:
             return
         a0, b0 = self._pinch_start
-        u = (b0 - a0) / max(self._pinch_d0, 1e-9)
-        if float((a - a0) @ u) >= p.pinch_mm / 4 and float((b0 - b) @ u) >= p.pinch_mm / 4:
+        scale = max(self._pinch_d0, 1e-9)
+        u = [(b0[i] - a0[i]) / scale for i in range(3)]
+        if (_along(a, a0, u) >= p.pinch_mm / 4 and _along(b0, b, u) >= p.pinch_mm / 4):
             self._approach = self._pinch_d0 - d
             out.append("pinch")
             self._pinched = True

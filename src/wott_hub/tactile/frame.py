@@ -8,6 +8,8 @@ import numpy as np
 
 __all__ = ["FrameError", "TactileFrame"]
 
+_INTEGER = (int, np.integer)
+
 
 class FrameError(ValueError):
     """A frame that must not enter the pipeline (wrong shape, NaN/Inf, bad time)."""
@@ -27,8 +29,9 @@ class TactileFrame:
     pressure: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        if not isinstance(self.t_ns, int | np.integer) or self.t_ns < 0:
-            raise FrameError(f"t_ns must be a non-negative integer of nanoseconds, got {self.t_ns!r}")
+        t = self.t_ns
+        if not isinstance(t, _INTEGER) or t < 0:
+            raise FrameError(f"t_ns must be a non-negative integer of nanoseconds, got {t!r}")
         d = np.asarray(self.displacement, dtype=np.float64)
         if d.ndim != 2 or d.shape[1] != 3:
             raise FrameError(f"displacement must be an (N, 3) array, got shape {d.shape}")
@@ -37,8 +40,10 @@ class TactileFrame:
             raise FrameError(
                 f"displacement has NaN/Inf at {int(bad.sum())} node(s), first node {int(np.argmax(bad))}"
             )
-        object.__setattr__(self, "t_ns", int(self.t_ns))
-        object.__setattr__(self, "displacement", d)
+        if type(t) is not int:
+            object.__setattr__(self, "t_ns", int(t))
+        if d is not self.displacement:
+            object.__setattr__(self, "displacement", d)
         if self.pressure is not None:
             p = np.asarray(self.pressure, dtype=np.float64)
             if p.shape != (len(d),):

@@ -1,0 +1,38 @@
+"""The JSON texts of a frame's records, written straight from the processor's arrays.
+
+Contract: each function returns exactly ``events.record.encode`` of the payload the
+``FrameResult`` describes (``skin_deformed_detection()``, ``contact_information()``), byte for
+byte: clients, history and the codec's packed form all rely on that one text
+(tests/hub/test_payloads.py compares them on random frames). They exist because every
+frame of every device pays for them on the hub's event loop: building a dict per node or
+per contact first and encoding it costs 3-5x more (docs/hub.md, "Where the loop's time goes").
+"""
+
+from __future__ import annotations
+
+from wott_hub.tactile import FrameResult
+
+__all__ = ["contacts_json", "skin_deformed_json"]
+
+
+def skin_deformed_json(res: FrameResult) -> str:
+    """``encode(res.skin_deformed_detection())`` (Python's float repr is what ``json`` writes)."""
+    nodes = ",".join([f'{{"deformedNodeID":{i},"deformedNodeIntensity":{v!r}}}'
+                      for i, v in zip(res.deformed_nodes.tolist(), res.intensity.tolist(), strict=True)])
+    return (f'{{"timeStamp":{res.t_ns},"numOfDeformedNodes":{len(res.deformed_nodes)},'
+            f'"arrayOfDeformedNodes":[{nodes}]}}')
+
+
+def _xyz(values: list[float]) -> str:
+    x, y, z = values
+    return f'{{"x":{round(x, 4)!r},"y":{round(y, 4)!r},"z":{round(z, 4)!r}}}'
+
+
+def contacts_json(res: FrameResult) -> str:
+    """``encode(res.contact_information())``: rounded to 0.1 µm / 0.1 mN as that method rounds."""
+    contacts = res.contacts
+    where = ",".join([_xyz(c.location.tolist()) for c in contacts])
+    force = ",".join([_xyz(c.force.tolist()) for c in contacts])
+    if "n" in where or "n" in force:  # "nan"/"inf": the only letters besides x, y, z there
+        raise ValueError("Out of range float values are not JSON compliant")  # as encode() says
+    return f'{{"numOfContacts":{len(contacts)},"contactLocations":[{where}],"contactForces":[{force}]}}'

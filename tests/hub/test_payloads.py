@@ -1,0 +1,48 @@
+"""The hub's hand-written record texts are exactly ``encode`` of the payloads (hub/payloads.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wott_hub.events.record import encode
+from wott_hub.examples import example_device
+from wott_hub.hub.payloads import contacts_json, skin_deformed_json
+from wott_hub.tactile import FrameProcessor, TactileFrame
+from wott_hub.tactile.indentation import Indenter, indent
+
+
+@pytest.mark.parametrize("shape", ["flat", "barrel"])
+def test_texts_equal_encode_of_the_payloads_on_random_multi_contact_frames(shape):
+    desc = example_device(shape)
+    mesh = desc.mesh
+    free = mesh.free_indices
+    proc = FrameProcessor(desc.mesh)
+    rng = np.random.default_rng(7)
+    seen_contacts = set()
+    for t in range(1, 200):
+        if t % 7 == 0:  # rest frames: releases and empty contact lists
+            d = np.zeros_like(mesh.nodes)
+        else:
+            presses = [Indenter(mesh.nodes[rng.choice(free)], float(rng.uniform(0.05, 40.0)),
+                                float(rng.uniform(1.0, 9.0)), rng.normal(0, 0.5, 3))
+                       for _ in range(int(rng.integers(1, 5)))]
+            d = indent(mesh, presses) * float(rng.choice([1e-3, 1.0, 3.7]))
+        res = proc.process(TactileFrame(t, d))
+        seen_contacts.add(len(res.contacts))
+        if res.packet_due:
+            assert skin_deformed_json(res) == encode(res.skin_deformed_detection())
+        assert contacts_json(res) == encode(res.contact_information())
+    assert {0, 1}.issubset(seen_contacts) and max(seen_contacts) >= 2
+
+
+def test_a_contact_whose_numbers_are_not_finite_is_refused_as_encode_refuses_it():
+    desc = example_device("flat")
+    proc = FrameProcessor(desc.mesh)
+    d = indent(desc.mesh, [Indenter(desc.mesh.nodes[desc.mesh.free_indices[100]], 1.0, 4.0)])
+    res = proc.process(TactileFrame(1, d))
+    res.contacts[0].force[2] = np.inf  # what an overflowing force model would produce
+    with pytest.raises(ValueError):
+        encode(res.contact_information())
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        contacts_json(res)
