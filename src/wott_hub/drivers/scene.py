@@ -69,7 +69,7 @@ class SceneDriver(Driver, Tareable):
         self.tares = 0
         self._closed = asyncio.Event()
         self._loop_frames = self._repeating_frames()
-        self._cache: list[np.ndarray] = []
+        self._cache: list[np.ndarray | None] = [None] * self._loop_frames
 
     def _repeating_frames(self) -> int:
         """Frames per loop if the scene repeats frame for frame and one loop fits the cache; else 0."""
@@ -86,13 +86,11 @@ class SceneDriver(Driver, Tareable):
         n = self._loop_frames
         if not n:
             return self.scene.displacement_at(t_s, self.description.mesh)
-        cache, i = self._cache, k % n
-        if i < len(cache):
-            return cache[i]
-        d = self.scene.displacement_at(i / self.rate_hz, self.description.mesh)
-        if i == len(cache):
+        i = k % n
+        d = self._cache[i]
+        if d is None:  # (a frame skipped in the first loop is computed when it first comes)
+            d = self._cache[i] = self.scene.displacement_at(i / self.rate_hz, self.description.mesh)
             d.setflags(write=False)  # shared by every loop from now on
-            cache.append(d)
         return d
 
 
