@@ -158,7 +158,8 @@ def run(args: argparse.Namespace) -> str:
         "`fsync` on, `synchronous_commit=off`); SQLite in WAL mode, `synchronous=NORMAL`: on both, a "
         "crash of the hub loses nothing committed, a power loss may take back the last commits.",
         "",
-        f"History: {len(records):,} records ({size:.0f} bytes of JSON on average) through the hub's "
+        f"History: {len(records):,} records ({size:.0f} bytes of JSON on average; skin packets carry "
+        "their arrays, as the pipeline publishes them, and are stored packed) through the hub's "
         "`HistoryWriter` (batches of up to 20,000 rows, multi-row INSERTs of 1,000, one transaction "
         "per batch); target ≥ 50,000 events/s on both.",
         "",

@@ -15,16 +15,23 @@ __all__ = ["history_bench", "run"]
 
 
 def _hour_records(thing: str, frames: int):
-    from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, encode
+    """Records as the pipeline publishes them: a skin packet (its text and its arrays,
+    ``SkinArrays``, which history packs) and a contactInformation change per frame."""
+    import numpy as np
+
+    from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, SkinArrays, encode
 
     t0 = time.time_ns()
     contact = encode({"numOfContacts": 1, "contactLocations": [{"x": 1.5, "y": 2.25, "z": 4.0}],
                       "contactForces": [{"x": 0.01, "y": -0.02, "z": -0.35}]})
+    nodes = payload(20, 0)["arrayOfDeformedNodes"]
+    skin = SkinArrays(np.array([n["deformedNodeID"] for n in nodes]),
+                      np.array([n["deformedNodeIntensity"] for n in nodes]))
     seq = 0
     for k in range(frames):
         t = t0 + int(k * 1e9 / 120)
         seq += 1
-        yield Record(thing, seq, KIND_EVENT, "skinDeformedDetection", t, encode(payload(20, t)))
+        yield Record(thing, seq, KIND_EVENT, "skinDeformedDetection", t, encode(payload(20, t)), skin=skin)
         seq += 1
         yield Record(thing, seq, KIND_PROPERTY, "contactInformation", t, contact)
 
@@ -66,7 +73,7 @@ async def history_bench(tmp: Path, frames: int) -> dict:
         while time.perf_counter() - t0 < 1.5:
             r = records[n]
             conn.execute(ins, {"thing_key": 1, "seq": r.seq, "t_ns": r.t_ns, "kind": r.kind, "name": r.name,
-                               "data": r.data})
+                               "data": r.data.encode()})  # text, as revision 0006 stores it
             conn.commit()
             n += 1
     naive_rate = n / (time.perf_counter() - t0)
