@@ -13,6 +13,7 @@ A looping scene of the indentation model (a pure function of scene time) whose
 loop is a whole number of frames repeats exactly: its frames are computed in
 the first loop and replayed from then on (``LOOP_CACHE_MB`` at most), so a
 simulated fleet costs the hub what real devices would, not the simulation again.
+
 A consumer slower than the rate makes the driver skip the missed ticks (a real
 camera drops frames too) rather than burst to catch up; skipped ticks are
 counted and reported as ``degraded`` health while it lasts. Frame timestamps
