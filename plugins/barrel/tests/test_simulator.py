@@ -53,3 +53,21 @@ def test_simulated_cameras_end_with_a_non_looping_scene(layout):
         n += 1
     assert cams.ended and "ended" in cams.failure
     assert n == int(Scene.from_dict(PRESS).duration_s * 20) + 1
+
+
+def test_frames_at_rest_reuse_the_rest_pictures_with_the_same_bytes(layout):
+    """Rest frames are exposed from pictures drawn once: byte for byte what drawing each frame gives."""
+    from wott_vision.render import render_markers
+
+    sim = BarrelSimulator(layout, Scene.from_dict(PRESS))  # touching in [0, 0.4) s
+    reference_rng = np.random.default_rng(RenderSettings().seed)
+    s = sim.settings
+    for t in (0.5, 0.6, 0.2, 0.7):  # rest, rest (reused), a press, rest again
+        images, truth = sim.render(t)
+        points, radii = layout.points_and_radii(truth)
+        for img, cam, p, r in zip(images, layout.cameras, points, radii, strict=True):
+            expected = render_markers(p, r, size=(cam.height, cam.width), blur_sigma=s.blur_sigma,
+                                      noise_std=s.noise_std, rng=reference_rng, intensity=s.intensity,
+                                      background=s.background)
+            assert np.array_equal(img, expected)
+    assert sim._rest is not None

@@ -163,3 +163,22 @@ def test_registry_and_driver_do_not_import_cv2():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "256"
+
+
+def test_frames_at_rest_reuse_the_rest_picture_with_the_same_bytes():
+    """Rest frames are exposed from a picture drawn once: byte for byte what drawing each frame gives."""
+    from wott_vision.render import render_markers
+
+    lay = PadLayout(**SMALL)
+    scene = Scene.from_dict({"step": [{"kind": "press", "at": [7.0, 7.0, 0.0], "start_s": 0.0,
+                                       "duration_s": 0.4, "depth_mm": 1.0}]})
+    sim = PadSimulator(lay, scene, RenderSettings())
+    reference_rng = np.random.default_rng(RenderSettings().seed)
+    for t in (0.5, 0.6, 0.2, 0.7):  # rest, rest (reused), a press, rest again
+        img, truth = sim.render(t)
+        px, radius = sim.markers(t, truth)
+        o = lay.optics
+        expected = render_markers(px, radius, size=(o.height, o.width), blur_sigma=1.0, noise_std=2.0,
+                                  rng=reference_rng)
+        assert np.array_equal(img, expected)
+    assert sim._rest is not None

@@ -8,13 +8,17 @@ area and keeps the drawn centroid on the true centre at any sub-pixel offset
 quantise the very motion the tracker measures). A Gaussian blur stands for the
 lens, additive Gaussian noise for the sensor. Discs are accumulated as one
 sparse sum (``np.bincount``), so 256 markers cost about a millisecond.
+
+``marker_picture`` is the noiseless, blurred picture and ``expose`` adds the
+sensor noise: a simulator whose skin is at rest draws its picture once and
+exposes it on every frame, the same bytes ``render_markers`` would give.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["render_markers"]
+__all__ = ["expose", "marker_picture", "render_markers"]
 
 
 def render_markers(
@@ -34,6 +38,20 @@ def render_markers(
     centred on (x=j, y=i). Markers with a non-finite centre or a radius <= 0 are
     not drawn; overlapping discs saturate. ``noise_std`` is in grey levels.
     """
+    picture = marker_picture(points, radius_px, size, blur_sigma, intensity=intensity, background=background)
+    return expose(picture, noise_std, rng)
+
+
+def marker_picture(
+    points: np.ndarray,
+    radius_px: float | np.ndarray,
+    size: tuple[int, int] = (480, 640),
+    blur_sigma: float = 1.0,
+    *,
+    intensity: float = 255.0,
+    background: float = 0.0,
+) -> np.ndarray:
+    """The float32 (H, W) picture ``render_markers`` draws, before sensor noise and rounding."""
     h, w = (int(size[0]), int(size[1]))
     if h <= 0 or w <= 0:
         raise ValueError(f"size must be (H, W) > 0, got {size}")
@@ -69,19 +87,26 @@ def render_markers(
                                minlength=h * w)
         np.minimum(coverage, 1.0, out=coverage)
     img: np.ndarray = (background + (intensity - background) * coverage).reshape(h, w).astype(np.float32)
-    if (blur_sigma and blur_sigma > 0) or (noise_std and noise_std > 0):
+    if blur_sigma and blur_sigma > 0:
         import cv2
 
-        if blur_sigma and blur_sigma > 0:
-            img = cv2.GaussianBlur(img, (0, 0), sigmaX=float(blur_sigma), borderType=cv2.BORDER_REPLICATE)
-        if noise_std and noise_std > 0:
-            # OpenCV's generator is 5x faster than NumPy's for a frame of noise; seeding it from
-            # ``rng`` keeps a render reproducible (OpenCV's generator is per thread)
-            rng = rng if rng is not None else np.random.default_rng()
-            cv2.setRNGSeed(int(rng.integers(2**31 - 1)))
-            noise = np.empty_like(img)
-            # OpenCV's stubs take only arrays for mean and stddev; it takes scalars as well
-            cv2.randn(noise, 0.0, float(noise_std))  # type: ignore[call-overload]
-            img += noise
+        img = cv2.GaussianBlur(img, (0, 0), sigmaX=float(blur_sigma), borderType=cv2.BORDER_REPLICATE)
+    return img
+
+
+def expose(picture: np.ndarray, noise_std: float = 0.0, rng: np.random.Generator | None = None) -> np.ndarray:
+    """``picture`` (float32, left unchanged) with sensor noise of ``noise_std`` grey levels, as uint8."""
+    img = picture
+    if noise_std and noise_std > 0:
+        import cv2
+
+        # OpenCV's generator is 5x faster than NumPy's for a frame of noise; seeding it from
+        # ``rng`` keeps a render reproducible (OpenCV's generator is per thread)
+        rng = rng if rng is not None else np.random.default_rng()
+        cv2.setRNGSeed(int(rng.integers(2**31 - 1)))
+        noise = np.empty_like(picture)
+        # OpenCV's stubs take only arrays for mean and stddev; it takes scalars as well
+        cv2.randn(noise, 0.0, float(noise_std))  # type: ignore[call-overload]
+        img = picture + noise
     image: np.ndarray = np.clip(np.rint(img), 0, 255).astype(np.uint8)
     return image
