@@ -279,3 +279,30 @@ def test_the_writer_packs_the_pipelines_records_from_their_arrays(writer, reader
     assert stored == [encode(r.kind, r.name, r.t_ns, r.data) for r in recs]
     got, _ = reader.rows("pad", start, recs[-1].seq, (KIND_EVENT, SKIN), 10_000)
     assert [r.data for r in got] == [r.data for r in recs]
+
+
+def test_a_batch_longer_than_a_chunk_and_joined_payloads_decode_as_one_by_one():
+    """``decode_many`` works in chunks of rows and ``decode_joined`` (a page SQLite joined into one
+    value) slices the same payloads out of one buffer: both give each row's own text, in order."""
+    from wott_hub.history.codec import _CHUNK, decode_joined
+
+    rng = np.random.default_rng(5)
+    recs = []
+    for i in range(2 * _CHUNK + 77):
+        t = 10**18 + i * 8_333_333
+        if i % 3 == 2:  # text rows between the packets, some not ASCII, some empty
+            text = ["", '{"é":1}', '{"a":2}'][i % 2 + (i % 5 == 0)]
+            recs.append(Record("pad", i, KIND_EVENT, "note", t, text))
+            continue
+        ids = np.sort(rng.choice(12_000 if i % 7 == 0 else 700, size=int(rng.integers(0, 25)), replace=False))
+        values = np.round(rng.uniform(0, 3, len(ids)), 3)
+        recs.append(_pipeline_record(i, t, ids, values, same_time=i % 4 != 1))
+    stored = encode_records(recs)
+    assert sum(s[:1] == bytes((PACKED,)) for s in stored) > _CHUNK
+    times = [r.t_ns for r in recs]
+    assert decode_many(stored, times) == [r.data for r in recs]
+    joined = b"".join(stored) + bytes(16)
+    sizes = np.array([len(s) for s in stored], np.int64)
+    assert decode_joined(joined, sizes, np.array(times, np.int64)) == [r.data for r in recs]
+    with pytest.raises(ValueError, match="lengths"):
+        decode_joined(joined[:-1], sizes, np.array(times, np.int64))

@@ -73,3 +73,33 @@ def test_loop_starts_again_after_the_end(reader, recorded):
 def test_negative_speed_is_refused(reader):
     with pytest.raises(ValueError):
         Replayer(reader, "d", speed=-1)
+
+
+def test_pages_sqlite_cannot_join_are_read_row_by_row(database, engine, reader, recorded):
+    """On SQLite a page is read as one joined row (``reader._JOINED``); a page longer than SQLite's
+    longest value, or holding a non-ASCII payload stored as text (before revision 0006; its
+    ``length`` counts characters), is read row by row: the same records either way."""
+    import sqlite3
+
+    import sqlalchemy as sa
+
+    from wott_hub.history import HistoryReader, create_engine
+
+    if engine.dialect.name != "sqlite":
+        pytest.skip("the joined page is SQLite's")
+    with engine.begin() as conn:  # payloads as text, as revision 0005 stored them
+        conn.execute(sa.text("UPDATE events SET data = CAST(data AS TEXT) WHERE seq = :s"),
+                     {"s": recorded[51].seq})
+        conn.execute(sa.text("UPDATE events SET data = :d WHERE seq = :s"),
+                     {"d": '{"note":"é"}', "s": recorded[153].seq})
+    want = [(r.kind, r.name, '{"note":"é"}' if i == 153 else r.data) for i, r in enumerate(recorded)]
+    short = create_engine(database)
+    sa.event.listen(short, "connect", lambda dbapi, _: dbapi.setlimit(sqlite3.SQLITE_LIMIT_LENGTH, 4000))
+    try:
+        for rd in (reader, HistoryReader(short)):
+            got: list[tuple[int, str, str]] = []
+            emit = lambda k, n, t, d, got=got: got.append((k, n, d))  # noqa: E731
+            asyncio.run(Replayer(rd, "d", speed=0, page=40).run(emit))
+            assert got == want
+    finally:
+        short.dispose()

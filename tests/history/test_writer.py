@@ -4,8 +4,15 @@ from __future__ import annotations
 
 import io
 import json
+import time
+from collections.abc import Callable
 
+from sqlalchemy.engine import Engine
+
+from wott_hub.events.record import Record
 from wott_hub.history import RESERVE, HistoryWriter, Retention, apply_retention, export_jsonl
+
+MakeRecords = Callable[..., list[Record]]  # conftest.make_records
 
 
 def test_records_are_written_in_batches_and_read_back_in_order(writer, reader, make_records):
@@ -144,3 +151,91 @@ def test_a_refused_row_is_isolated_and_the_rest_written_on_either_engine(writer,
     rows = {row[0]: row for page in reader.pages("d") for row in page}
     assert sorted(rows) == [r.seq for r in recs]
     assert rows[50][3] == "other" and all(rows[r.seq][4] == r.data for r in recs if r.seq != 50)
+
+
+def _stored(engine: Engine) -> list[tuple[int, str, bytes]]:
+    with engine.connect() as conn:
+        return [(seq, name, bytes(data)) for seq, name, data in
+                conn.exec_driver_sql("SELECT seq, name, data FROM events ORDER BY seq")]
+
+
+def test_batches_written_while_the_next_is_encoded_store_every_byte(engine: Engine,
+                                                                     make_records: MakeRecords) -> None:
+    """A writer behind (many batches waiting): on PostgreSQL the next batch is encoded while the
+    server takes this one's COPY data (built by the writer itself). Each record's stored bytes
+    are exactly codec.encode_records' (names and payloads beyond ASCII too), commits in order."""
+    from wott_hub.events.record import KIND_PROPERTY
+    from wott_hub.history.codec import encode_records
+
+    tops: list[dict[str, int]] = []
+    w = HistoryWriter(engine, interval_s=0.01, batch_max=500, on_commit=tops.append)
+    try:
+        start = w.register_thing("d")
+        recs = make_records("d", start, 6000)
+        recs[4321] = Record("d", recs[4321].seq, KIND_PROPERTY, "größe-ü", recs[4321].t_ns, '{"é": "ß"}')
+        recs[17] = Record("d", recs[17].seq, KIND_PROPERTY, "empty", recs[17].t_ns, "")
+        for r in recs:  # all waiting before the writer starts: it runs behind from the first batch
+            w.submit(r)
+        w.start()
+        assert w.flush()
+    finally:
+        w.stop()
+    assert (w.written, w.failed_records, w.errors) == (6000, 0, 0)
+    assert _stored(engine) == [(r.seq, r.name, d) for r, d in zip(recs, encode_records(recs), strict=True)]
+    seqs = [t["d"] for t in tops]
+    assert seqs == sorted(set(seqs)) and seqs[-1] == recs[-1].seq  # watermarks only move forward
+
+
+def test_a_failed_batch_and_the_one_taken_after_it_are_retried_in_order(engine: Engine,
+                                                                         make_records: MakeRecords) -> None:
+    """A failure that is not about the rows (here the table is missing for a while) puts the
+    batch and the one already taken to be encoded back at the head of the queue, in order."""
+    tops: list[dict[str, int]] = []
+    w = HistoryWriter(engine, interval_s=0.01, batch_max=500, on_commit=tops.append)
+    try:
+        start = w.register_thing("d")
+        recs = make_records("d", start, 4000)
+        with engine.begin() as conn:
+            conn.exec_driver_sql("ALTER TABLE events RENAME TO events_away")
+        for r in recs:
+            w.submit(r)
+        w.start()
+        deadline = time.monotonic() + 10
+        while w.errors == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert w.errors >= 1 and w.written == 0 and w.queue_depth + w.written <= 4000
+        with engine.begin() as conn:
+            conn.exec_driver_sql("ALTER TABLE events_away RENAME TO events")
+        assert w.flush()
+    finally:
+        w.stop()
+    assert (w.written, w.failed_records, w.dropped) == (4000, 0, 0)
+    assert [s for s, _, _ in _stored(engine)] == [r.seq for r in recs]
+    seqs = [t["d"] for t in tops]
+    assert seqs == sorted(set(seqs)) and seqs[-1] == recs[-1].seq
+
+
+def test_a_number_postgresql_cannot_store_is_isolated_not_retried_forever(pg_url: str,
+                                                                          make_records: MakeRecords) -> None:
+    """The COPY data is built by the writer: a value beyond its column (int8 t_ns) is the row's
+    DataError, isolated like a row the server refuses."""
+    from wott_hub.history import create_engine, upgrade
+
+    engine = create_engine(pg_url)
+    upgrade(engine)
+    w = HistoryWriter(engine, interval_s=0.01)
+    try:
+        start = w.register_thing("d")
+        recs = make_records("d", start, 40)
+        bad = recs[21]
+        recs[21] = Record("d", bad.seq, bad.kind, bad.name, 1 << 63, bad.data)
+        w.start()
+        for r in recs:
+            w.submit(r)
+        assert w.flush()
+    finally:
+        w.stop()
+        engine.dispose()
+    assert (w.written, w.failed_records) == (39, 1)
+    assert f"seq {bad.seq} not recorded" in w.last_error and "out of range" in w.last_error
+    assert [s for s, _, _ in _stored(engine)] == [r.seq for r in recs if r is not recs[21]]

@@ -45,7 +45,7 @@ import numpy.typing as npt
 
 from wott_hub.events.record import KIND_EVENT, Record, SkinArrays
 
-__all__ = ["PACKED", "SKIN_EVENT", "decode", "decode_many", "encode", "encode_records"]
+__all__ = ["PACKED", "SKIN_EVENT", "decode", "decode_joined", "decode_many", "encode", "encode_records"]
 
 PACKED = 0x01
 _MARK = bytes((PACKED,))
@@ -80,64 +80,140 @@ class _Packets(NamedTuple):
 
 # --- numbers -> text ------------------------------------------------------------------------
 
-_ID_TABLE = 8192  # ids below: digits by table (every mesh so far), above: computed
-_ID_WIDTH = 10  # digits of the largest uint32
-_NODE = np.dtype([("head", "u1"), ("id", "u1", (_ID_WIDTH,)), ("key", "u1"), ("tail", "<u8")])
-"""One node's text, NUL-padded, with a marker byte for each key (expanded by ``bytes.replace``,
-which costs less than squeezing 43 more bytes per node): ``head`` id ``key`` repr(µm / 1000) "},"."""
-_HEAD_MARK, _KEY_MARK = 2, 3
 _NODE_HEAD = b'{"deformedNodeID":'
 _NODE_KEY = b',"deformedNodeIntensity":'
-_NODE_FIXED = len(_NODE_HEAD) + len(_NODE_KEY)
-_POW10 = 10 ** np.arange(_ID_WIDTH, dtype=np.int64)
-_ID_LEN = 1 + (np.arange(_ID_TABLE)[:, None] >= _POW10[1:]).sum(axis=1)
+_HEAD_MARK, _KEY_MARK = b"\2", b"\3"
+_HEADER = b'{"timeStamp":' + bytes(20) + b',"numOfDeformedNodes":' + bytes(6) + b',"arrayOfDeformedNodes":['
+_TS_AT = _HEADER.index(bytes(20))  # 20 places: a sign and the 19 digits of an int64
+_N_AT = _HEADER.index(bytes(6), _TS_AT + 20)  # 6 places: n <= _MAX_NODES
+_FIXED = len(_HEADER) - 26 + 2  # a packet's text beyond its numbers and nodes (with "]}")
+_SHORT_IDS = 10_000  # ids below: 4 places and digits by table (every mesh so far)
+_ID_WIDTH = 10  # places of the largest uint32
+_PAIRS = np.frombuffer(b"".join(b"%02d" % i for i in range(100)), "V2")
+_TENS = np.uint64(10) ** np.arange(19, -1, -1, dtype=np.uint64)
+_HUNDRED = np.uint64(100)
+
+
+class _Layout(NamedTuple):
+    """Rows of one width for a batch's text: a node's row ``head`` id ``key`` tail (NUL-padded,
+    the keys as marker bytes expanded by ``bytes.replace``, which costs less than squeezing 43
+    more bytes per node), a packet's header in ``heads`` rows, its footer ("]}") in one."""
+
+    node: np.dtype[np.void]
+    heads: int
+    template: npt.NDArray[np.uint8]  # the header rows, then the footer row
 
 
 @functools.cache
-def _tables() -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint64], npt.NDArray[np.int64]]:
-    """Digits of the ids below ``_ID_TABLE``, ``repr(k / 1000) + "},"`` of every uint16 ``k``
-    (8 bytes at most: "65.535},") and its length; built on first use (~40 ms, 0.7 MB)."""
-    ids = b"".join(str(i).encode().ljust(_ID_WIDTH, b"\0") for i in range(_ID_TABLE))
+def _layout(id_width: int) -> _Layout:
+    node = np.dtype([("head", "u1"), ("id", f"V{id_width}"), ("key", "u1"), ("tail", "<u8")])
+    width = node.itemsize
+    heads = -(-len(_HEADER) // width)
+    template = _HEADER.ljust(heads * width, b"\0") + b"]}".ljust(width, b"\0")
+    return _Layout(node, heads, np.frombuffer(template, np.uint8))
+
+
+@functools.cache
+def _tables() -> tuple[npt.NDArray[np.void], npt.NDArray[np.int64], npt.NDArray[np.uint64],
+                       npt.NDArray[np.uint64], npt.NDArray[np.int64]]:
+    """Digits of the ids below ``_SHORT_IDS`` and their lengths; ``repr(k / 1000) + "},"`` of
+    every uint16 ``k`` (8 bytes at most: "65.535},"), the same without the ",", and its length;
+    built on first use (~40 ms, 1.7 MB)."""
+    ids = [str(i).encode() for i in range(_SHORT_IDS)]
     tails = [(repr(k / 1000) + "},").encode() for k in range(_MAX_MICRO + 1)]
-    packed = b"".join(t.ljust(8, b"\0") for t in tails)
-    return (np.frombuffer(ids, np.uint8).reshape(-1, _ID_WIDTH), np.frombuffer(packed, "<u8"),
+    return (np.frombuffer(b"".join(i.rjust(4, b"\0") for i in ids), "V4"),
+            np.fromiter(map(len, ids), np.int64, len(ids)),
+            np.frombuffer(b"".join(t.ljust(8, b"\0") for t in tails), "<u8"),
+            np.frombuffer(b"".join(t[:-1].ljust(8, b"\0") for t in tails), "<u8"),
             np.fromiter(map(len, tails), np.int64, len(tails)))
 
 
-def _id_digits(ids: _Int) -> tuple[npt.NDArray[np.uint8], _Int]:
-    """The ids' digits (NUL-padded rows) and their numbers of digits."""
-    if not len(ids) or ids.max() < _ID_TABLE:
-        return _tables()[0][ids], _ID_LEN[ids]
-    low = ids < _ID_TABLE
-    out = np.zeros((len(ids), _ID_WIDTH), np.uint8)
-    out[low] = _tables()[0][ids[low]]
-    size = 1 + (ids[:, None] >= _POW10[1:]).sum(axis=1)
-    big = ids[~low][:, None]
-    exp = size[~low][:, None] - 1 - np.arange(_ID_WIDTH)  # the place of each digit
-    digits = big // _POW10[np.maximum(exp, 0)] % 10 + ord("0")
-    out[~low] = np.where(exp >= 0, digits, 0)
-    return out, size
+def _decimal(values: _Int, width: int) -> tuple[npt.NDArray[np.uint8], _Int]:
+    """The values' decimal text, right-aligned in rows of ``width`` (even) NUL-padded bytes, a
+    "-" in the first place for a negative value (the NULs go: "-\\0\\012" reads "-12"), and its
+    length. Two digits per step, by table; divisions by a scalar, which NumPy multiplies."""
+    mag = values.astype(np.uint64)
+    neg = values < 0
+    mag[neg] = np.negative(mag[neg])  # |int64 min| too: 2**63 fits a uint64
+    pairs = np.empty((len(values), width // 2), np.intp)
+    q = mag
+    for k in range(width // 2 - 1, -1, -1):
+        rest = q // _HUNDRED
+        pairs[:, k] = q - rest * _HUNDRED
+        q = rest
+    digits = _PAIRS[pairs].view(np.uint8)
+    lead = mag[:, None] < _TENS[-width:]
+    lead[:, -1] = False  # 0 is "0"
+    digits[lead] = 0
+    digits[neg, 0] = ord("-")
+    length: _Int = width - lead.sum(axis=1) + neg
+    return digits, length
+
+
+def _id_digits(ids: _Int) -> tuple[npt.NDArray[np.void], _Int]:
+    """The ids' digits, ``V4`` (all below ``_SHORT_IDS``) or ``V10`` (uint32) rows, and their lengths."""
+    table, lengths, *_ = _tables()
+    if not len(ids) or ids.max() < _SHORT_IDS:
+        return table[ids], lengths[ids]
+    digits, length = _decimal(ids, _ID_WIDTH)
+    return np.ascontiguousarray(digits).view(f"V{_ID_WIDTH}")[:, 0], length
+
 
 
 def _texts(p: _Packets) -> list[str]:
-    """The pipeline's text of each packet: the nodes' texts of all packets written into one
-    buffer by NumPy, squeezed and expanded by ``bytes`` methods (C), then cut per packet."""
-    _, tails, tail_len = _tables()
-    nodes = np.empty(len(p.ids), _NODE)
-    nodes["head"] = _HEAD_MARK
-    digits, id_len = _id_digits(p.ids)
-    nodes["id"] = digits
-    nodes["key"] = _KEY_MARK
+    """The pipeline's text of each packet: every packet's header, nodes and footer written as
+    NUL-padded rows by NumPy, put in order by one gather, squeezed by ``bytes.translate``,
+    expanded by ``bytes.replace`` (C) and cut per packet at lengths NumPy adds up: no Python per
+    packet but the cut, none per node."""
+    count = len(p.n)
+    if not count:
+        return []
+    _, _, tails, last_tails, tail_len = _tables()
+    id_digits, id_len = _id_digits(p.ids)
+    layout = _layout(id_digits.dtype.itemsize)
+    heads = layout.heads * count
+    rows = np.empty(heads + 1 + len(p.ids), f"V{layout.node.itemsize}")  # headers, a footer, nodes
+    head = rows[:heads].view(np.uint8).reshape(count, -1)
+    head[:] = layout.template[:head.shape[1]]
+    head[:, _TS_AT:_TS_AT + 20], ts_len = _decimal(p.ts, 20)
+    n_digits, n_len = _id_digits(p.n)  # by table: n < 10,000 (all but absurd packets)
+    if n_digits.dtype.itemsize == 4:
+        head[:, _N_AT + 2:_N_AT + 6] = n_digits.view(np.uint8).reshape(count, 4)
+    else:
+        head[:, _N_AT:_N_AT + 6], n_len = _decimal(p.n, 6)
+    rows[heads] = layout.template[head.shape[1]:].view(rows.dtype)[0]
+    nodes = rows[heads + 1:].view(layout.node)
+    nodes["head"] = ord(_HEAD_MARK)
+    nodes["id"] = id_digits
+    nodes["key"] = ord(_KEY_MARK)
     nodes["tail"] = tails[p.micro]
-    text = (nodes.tobytes().translate(None, b"\0").replace(b"\2", _NODE_HEAD).replace(b"\3", _NODE_KEY)
-            .decode("ascii"))
-    ends = np.zeros(len(p.ids) + 1, np.int64)
-    np.cumsum(_NODE_FIXED + id_len + tail_len[p.micro], out=ends[1:])
-    start = np.cumsum(p.n) - p.n
-    a = ends[start]
-    b = ends[start + p.n] - (p.n > 0)  # without the "," after a packet's last node
-    return [f'{{"timeStamp":{t},"numOfDeformedNodes":{k},"arrayOfDeformedNodes":[{text[i:j]}]}}'
-            for t, k, i, j in zip(p.ts.tolist(), p.n.tolist(), a.tolist(), b.tolist(), strict=True)]
+    end = np.cumsum(p.n)
+    last = end[p.n > 0] - 1
+    nodes["tail"][last] = last_tails[p.micro[last]]
+    # the output's rows, packet by packet: its header rows, its nodes, the footer
+    start = end - p.n
+    packet = np.arange(count)
+    segments = np.empty((count, 3), np.int64)
+    segments[:, 0] = layout.heads
+    segments[:, 1] = p.n
+    segments[:, 2] = 1
+    shift = np.zeros((count, 3), np.int64)  # source row - output row, per segment
+    shift[:, 0] = -packet - start
+    shift[:, 1] = heads + 1 - (layout.heads + 1) * packet - layout.heads
+    order = np.arange(heads + count + len(p.ids)) + np.repeat(shift.ravel(), segments.ravel())
+    order[start + (layout.heads + 1) * packet + layout.heads + p.n] = heads  # the footers
+    # each packet's length: fixed text, numbers, nodes (a comma less for the last)
+    node_len = np.zeros(len(p.ids) + 1, np.int64)
+    np.cumsum(len(_NODE_HEAD) + len(_NODE_KEY) + id_len + tail_len[p.micro], out=node_len[1:])
+    size = _FIXED + ts_len + n_len + node_len[end] - node_len[start] - (p.n > 0)
+    cut = np.zeros(count + 1, np.int64)
+    np.cumsum(size, out=cut[1:])
+    text = (rows[order].tobytes().translate(None, b"\0").replace(_HEAD_MARK, _NODE_HEAD)
+            .replace(_KEY_MARK, _NODE_KEY).decode("ascii"))
+    bounds = cut.tolist()
+    if len(text) != bounds[-1]:  # never: the lengths are the rows' own; a guard, not a decision
+        raise RuntimeError("skin packets decoded to a text of another length than computed")
+    return [text[i:j] for i, j in zip(bounds, bounds[1:], strict=False)]  # n + 1 bounds: n texts
 
 
 # --- numbers <-> packed bytes ---------------------------------------------------------------
@@ -185,8 +261,16 @@ def _pack(p: _Packets, t_ns: _Int) -> list[bytes]:
 def _unpack(blobs: Sequence[bytes | memoryview], t_ns: list[int]) -> _Packets:
     """The numbers of packed payloads (ValueError for bytes that are not a whole packet)."""
     size = np.fromiter(map(len, blobs), np.int64, len(blobs))
-    buf = np.frombuffer(b"".join(blobs) + bytes(16), np.uint8)  # the padding: header reads stay inside
-    off = np.cumsum(size) - size
+    buf = np.frombuffer(b"".join([*blobs, _PAD]), np.uint8)
+    return _unpack_at(buf, np.cumsum(size) - size, size, np.array(t_ns, np.int64))
+
+
+_PAD = bytes(16)
+"""After a batch's bytes, so that reading a header never goes past the end."""
+
+
+def _unpack_at(buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int) -> _Packets:
+    """The numbers of the packets at ``off`` in ``buf`` (which ends with ``_PAD``)."""
     flags = buf[off + 1]
     first = buf[off + 2].astype(np.int64)
     wide = first >= 0x80
@@ -197,21 +281,43 @@ def _unpack(blobs: Sequence[bytes | memoryview], t_ns: list[int]) -> _Packets:
     ids_len = np.where(small, 3 + n, 4 * n)
     if ((size < 3) | (pos + ids_len + 2 * n != off + size)).any():
         raise ValueError("a stored skin packet is damaged: its length does not match its header")
-    ts = np.array(t_ns, np.int64)
+    ts = t_ns.copy()
     own = ~same
-    ts[own] = buf[(off + 3 + wide)[own, None] + np.arange(8)].copy().view("<i8")[:, 0]
-    p = _Packets(ts, n, np.empty(0, np.int64), np.empty(0, np.int64))
+    if own.any():
+        ts[own] = buf[(off + 3 + wide)[own, None] + np.arange(8)].copy().view("<i8")[:, 0]
+    micro = _spans(buf, pos + ids_len, 2 * n).view("<u2").astype(np.int64)
+    p = _Packets(ts, n, np.empty(0, np.int64), micro)
+    if (small | (n == 0)).all():  # the first id, then a byte per gap: runs of n bytes from the
+        has = n > 0               # first id's last byte (zeroed), added up
+        start = (np.cumsum(n) - n)[has]
+        gaps = _spans(buf, pos + 3, n).astype(np.int64)
+        gaps[start] = 0
+        run = np.cumsum(gaps)
+        return p._replace(ids=run + np.repeat(_words(buf, pos[has], "<u4") - run[start], n[has]))
     start, packet, j = p.node_index()
     node_pos = pos[packet]
-    # small gaps: the first id, then a byte per gap (at j = 0 the first id's last byte: zeroed)
     gaps = buf[node_pos + 3 + j].astype(np.int64)
     gaps[j == 0] = 0
     run = np.cumsum(gaps)
     ids = _words(buf, pos, "<u4")[packet] + run - run[start[packet]]
-    if not small.all():  # the others: a uint32 per id
-        whole = ~small[packet]
-        ids[whole] = _words(buf, (node_pos + 4 * j)[whole], "<u4")
-    return p._replace(ids=ids, micro=_words(buf, (pos + ids_len)[packet] + 2 * j, "<u2"))
+    whole = ~small[packet]  # the others: a uint32 per id
+    ids[whole] = _words(buf, (node_pos + 4 * j)[whole], "<u4")
+    return p._replace(ids=ids)
+
+
+def _spans(buf: npt.NDArray[np.uint8], at: _Int, length: _Int) -> npt.NDArray[np.uint8]:
+    """The bytes of ``buf`` in the spans [at, at + length), which follow one another, joined:
+    one mask made by ``np.repeat`` (what lies between the spans, the spans alternately)."""
+    runs = np.empty(2 * len(at) + 1, np.int64)
+    end = at + length
+    runs[0:-1:2] = at
+    runs[2:-1:2] -= end[:-1]
+    runs[1::2] = length
+    runs[-1] = len(buf) - (end[-1] if len(at) else 0)
+    keep = np.zeros(len(runs), bool)
+    keep[1::2] = True
+    spans: npt.NDArray[np.uint8] = buf[np.repeat(keep, runs)]
+    return spans
 
 
 def _words(buf: npt.NDArray[np.uint8], at: _Int, dtype: str) -> _Int:
@@ -339,13 +445,96 @@ def encode(kind: int, name: str, t_ns: int, data: str) -> bytes:
     return encode_records([Record("", 0, kind, name, t_ns, data)])[0]
 
 
+_CHUNK = 2048
+"""Rows decoded per NumPy pass. A pass's buffers (~1 MB of text for skin packets) stay in the
+CPU's caches and in memory the allocator reuses; a replay page of 20,000 rows at once made
+~10 MB buffers, fresh pages of the OS at every call, whose page faults cost a third of the time."""
+
+
 def decode_many(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
     """Each payload's text exactly as it was sent live (``t_ns``: the records' times, which a
     packet whose timeStamp equals it does not store again); packed ones decoded together."""
+    if len(stored) <= _CHUNK:
+        return _decode_chunk(stored, t_ns)
+    out: list[str] = []
+    for i in range(0, len(stored), _CHUNK):
+        out += _decode_chunk(stored[i:i + _CHUNK], t_ns[i:i + _CHUNK])
+    return out
+
+
+def decode_joined(joined: bytes, size: _Int, t_ns: _Int) -> list[str]:
+    """``decode_many`` of payloads given one after the other in ``joined``, which ends with 16
+    NUL bytes (``size``: their lengths): a page read as one value, no bytes object per row."""
+    buf = np.frombuffer(joined, np.uint8)
+    if len(buf) != int(size.sum()) + len(_PAD):
+        raise ValueError("the joined payloads do not have the lengths given")
+    ends = np.cumsum(size)
+    bounds = np.append(ends[_CHUNK - 1::_CHUNK], ends[-1:]).tolist()
+    out: list[str] = []
+    lo = 0
+    for i in range(0, len(size), _CHUNK):  # each chunk's own bytes: masks of its length
+        hi = bounds[i // _CHUNK] + len(_PAD)
+        chunk = size[i:i + _CHUNK]
+        out += _decode_at(joined, lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk, t_ns[i:i + _CHUNK],
+                          None)
+        lo = hi - len(_PAD)
+    return out
+
+
+def _decode_chunk(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
+    """``decode_many`` of at most ``_CHUNK`` rows: their bytes joined once, then ``_decode_at``."""
+    try:
+        joined = b"".join([*stored, _PAD])  # type: ignore[list-item]  # a str raises TypeError
+    except TypeError:  # a str among them: a row written before 0006 on a database that kept its text
+        return _decode_each(stored, t_ns)
+    size = np.fromiter(map(len, stored), np.int64, len(stored))
+    try:
+        times = np.fromiter(t_ns, np.int64, len(stored))
+    except OverflowError:
+        times = np.fromiter(map(_time, t_ns), np.int64, len(stored))
+    return _decode_at(joined, 0, np.frombuffer(joined, np.uint8), np.cumsum(size) - size, size, times,
+                      stored)  # type: ignore[arg-type]  # no str: the join took them all
+
+
+def _decode_at(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
+               stored: Sequence[bytes | memoryview] | None) -> list[str]:
+    """The texts of the payloads at ``off`` in ``buf``, which is ``joined[base:]`` (``stored``: the
+    same payloads as objects, else sliced from ``joined``): the packets found and unpacked in
+    place, the other payloads' UTF-8 decoded together; no Python per row but the slices."""
+    packed = (buf[off] == PACKED) & (size > 0)
+    where = np.flatnonzero(packed)
+    if len(where) == len(off):
+        return _texts(_unpack_at(buf, off, size, t_ns))
+    rest = np.flatnonzero(~packed).tolist()
+    if stored is not None:
+        items: Sequence[bytes | memoryview] = [stored[i] for i in rest]
+    else:
+        at = off[rest] + base
+        items = [joined[i:j] for i, j in zip(at.tolist(), (at + size[rest]).tolist(), strict=True)]
+    if not len(where):
+        return _utf8(items)
+    out = np.empty(len(off), object)
+    out[where] = _texts(_unpack_at(buf, off[where], size[where], t_ns[where]))
+    out[rest] = _utf8(items)
+    result: list[str] = out.tolist()
+    return result
+
+
+def _utf8(items: Sequence[bytes | memoryview]) -> list[str]:
+    """The items' UTF-8 text, decoded in one call: joined by NULs, which JSON text never holds
+    (a text that does holds one more: then one by one)."""
+    texts = b"\0".join(items).decode("utf-8").split("\0")
+    if len(texts) != len(items):
+        return [str(d, "utf-8") for d in items]
+    return texts
+
+
+def _decode_each(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
+    """``decode_many`` of rows some of which are ``str``: each row tested in Python."""
     where = [i for i, d in enumerate(stored) if d[:1] == _MARK]  # a str never starts with it
-    if not where:
-        return [d if isinstance(d, str) else str(d, "utf-8") for d in stored]
     out = [d if isinstance(d, str) else "" if d[:1] == _MARK else str(d, "utf-8") for d in stored]
+    if not where:
+        return out
     times = [t_ns[i] for i in where]
     if not -1 << 63 <= min(times) <= max(times) < 1 << 63:
         times = list(map(_time, times))

@@ -18,12 +18,13 @@ import asyncio
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
+from itertools import islice, repeat
 from typing import Any
 
 from wott_hub.errors import InvalidInput
 
-from .merge import merged_pages, resolve_range
-from .reader import HistoryReader
+from .merge import Row, merged_pages, resolve_range
+from .reader import Columns, HistoryReader
 
 __all__ = ["Replayer"]
 
@@ -67,10 +68,10 @@ class Replayer:
         """``run`` for several Things: ``emit`` is told which Thing each record belongs to."""
         return await self._run(None, emit, stop)
 
-    def _pages(self, lo: int | None, hi: int | None, tagged: bool) -> Iterator[list[tuple[Any, ...]]]:
+    def _pages(self, lo: int | None, hi: int | None, tagged: bool) -> Iterator[Columns | list[Row]]:
         if tagged:
             return merged_pages(self.reader, self.things, lo, hi, self.names, self.page)
-        return self.reader.pages(self.thing, lo, hi, self.names, self.page)  # (seq, t, kind, name, data)
+        return self.reader.columns(self.thing, lo, hi, self.names, self.page)
 
     async def _run(self, emit: Emit | None, emit_from: EmitFrom | None, stop: asyncio.Event | None) -> int:
         loop = asyncio.get_running_loop()
@@ -85,35 +86,44 @@ class Replayer:
             t_first = t_last = None
             n_cycle = 0
             while True:
-                rows = await nxt
-                if rows is None:
+                page = await nxt
+                if page is None:
                     break
+                # the next page is read (in a worker thread) while this one is emitted
                 nxt = asyncio.ensure_future(asyncio.to_thread(next, pages, None))
-                ti = 2 if tagged else 1  # where t_ns is in a row
+                if isinstance(page, Columns):
+                    count, t0, t1 = len(page.data), page.times[0], page.times[-1]
+                    records: Iterator[tuple[Any, ...]] = zip(repeat(None), page.times, page.kinds, page.names,
+                                                             page.data, strict=False)  # repeat: endless
+                else:
+                    count, t0, t1 = len(page), page[0][2], page[-1][2]
+                    records = ((thing, t, kind, name, data) for thing, _seq, t, kind, name, data in page)
                 if t_first is None:
-                    t_first = rows[0][ti]
+                    t_first = t0
                     if clock0 is None:
                         clock0 = loop.time()
                 if self.speed == 0:  # as fast as possible: no clock, a yield every 2,000 records
-                    for i in range(0, len(rows), 2000):
-                        if emit_from is not None:
-                            for thing, _seq, _t, kind, name, data in rows[i:i + 2000]:
-                                emit_from(thing, kind, name, now(), data)
-                        else:
-                            assert emit is not None
-                            for _seq, _t, kind, name, data in rows[i:i + 2000]:
+                    if emit is not None:  # one Thing: its columns zipped, no tuple per record
+                        assert isinstance(page, Columns)
+                        records = zip(page.kinds, page.names, page.data, strict=True)
+                    for done in range(2000, count + 2000, 2000):
+                        if emit is not None:
+                            for kind, name, data in islice(records, 2000):
                                 emit(kind, name, now(), data)
+                        else:
+                            assert emit_from is not None
+                            for thing, _t, kind, name, data in islice(records, 2000):
+                                emit_from(thing, kind, name, now(), data)
                         await asyncio.sleep(0)
                         if stop is not None and stop.is_set():
                             nxt.cancel()
-                            self.emitted += min(len(rows), i + 2000)
+                            self.emitted += min(count, done)
                             return self.emitted
-                    n_cycle += len(rows)
-                    self.emitted += len(rows)
-                    t_last = rows[-1][ti]
+                    n_cycle += count
+                    self.emitted += count
+                    t_last = t1
                     continue
-                for row in rows:
-                    t_ns = row[ti]
+                for thing, t_ns, kind, name, data in records:
                     due = clock0 + (t_ns - t_first) / 1e9 / self.speed
                     delay = due - loop.time()
                     if delay > 0.0002:
@@ -122,15 +132,15 @@ class Replayer:
                             nxt.cancel()
                             return self.emitted
                     if emit_from is not None:
-                        emit_from(row[0], row[3], row[4], now(), row[5])
+                        emit_from(thing, kind, name, now(), data)
                     else:
                         assert emit is not None
-                        emit(row[2], row[3], now(), row[4])
+                        emit(kind, name, now(), data)
                     t_last = t_ns
                     n_cycle += 1
                     self.emitted += 1
             self.cycles += 1
-            if not self.loop or t_first is None:
+            if not self.loop or t_first is None or t_last is None or clock0 is None:
                 return self.emitted
             span = (t_last - t_first) / 1e9
             gap = span / max(n_cycle - 1, 1)
