@@ -160,8 +160,8 @@ def run(args: argparse.Namespace) -> str:
         "",
         f"History: {len(records):,} records ({size:.0f} bytes of JSON on average; skin packets carry "
         "their arrays, as the pipeline publishes them, and are stored packed) through the hub's "
-        "`HistoryWriter` (batches of up to 20,000 rows, multi-row INSERTs of 1,000, one transaction "
-        "per batch); target ≥ 50,000 events/s on both.",
+        "`HistoryWriter` (batches of up to 20,000 rows, SQLite: multi-row INSERTs of 1,000; "
+        "PostgreSQL: one binary COPY; one transaction per batch); target ≥ 50,000 events/s on both.",
         "",
         markdown_table(["engine", "events/s", "seconds", "batches", "≥ 50,000/s"], hist_rows),
         "",
