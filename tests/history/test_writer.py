@@ -215,13 +215,14 @@ def test_a_failed_batch_and_the_one_taken_after_it_are_retried_in_order(engine: 
     assert seqs == sorted(set(seqs)) and seqs[-1] == recs[-1].seq
 
 
-def test_a_number_postgresql_cannot_store_is_isolated_not_retried_forever(pg_url: str,
-                                                                          make_records: MakeRecords) -> None:
-    """The COPY data is built by the writer: a value beyond its column (int8 t_ns) is the row's
-    DataError, isolated like a row the server refuses."""
+def test_a_number_the_database_cannot_store_is_isolated_not_retried_forever(database: str,
+                                                                           make_records: MakeRecords) -> None:
+    """A value beyond its column (int8 t_ns) is the row's DataError, isolated like a row the
+    database refuses: PostgreSQL's COPY data is built by the writer, SQLite's driver raises
+    OverflowError when it binds the value; neither is retried forever."""
     from wott_hub.history import create_engine, upgrade
 
-    engine = create_engine(pg_url)
+    engine = create_engine(database)
     upgrade(engine)
     w = HistoryWriter(engine, interval_s=0.01)
     try:

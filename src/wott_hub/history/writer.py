@@ -528,7 +528,10 @@ class HistoryWriter:
             sql = self._insert_full if len(part) == chunk else positional_insert(
                 self.engine, table, _COLUMNS, len(part))
             assert sql is not None  # positional, as _insert_full is
-            conn.exec_driver_sql(sql, tuple(itertools.chain.from_iterable(part)))
+            try:
+                conn.exec_driver_sql(sql, tuple(itertools.chain.from_iterable(part)))
+            except OverflowError as e:  # sqlite3 binding an int beyond int64: that row's data error
+                raise sa.exc.DataError(sql, None, OverflowError(f"a value out of range: {e}")) from None
 
     def _release_reservations(self) -> None:
         """After a clean stop, the next run continues right after the last committed seq."""
