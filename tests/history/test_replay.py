@@ -75,6 +75,7 @@ def test_negative_speed_is_refused(reader):
         Replayer(reader, "d", speed=-1)
 
 
+@pytest.mark.parametrize("database", ["sqlite"], indirect=True)  # the joined page is SQLite's
 def test_pages_sqlite_cannot_join_are_read_row_by_row(database, engine, reader, recorded):
     """On SQLite a page is read as one joined row (``reader._JOINED``); a page longer than SQLite's
     longest value, or holding a non-ASCII payload stored as text (before revision 0006; its
@@ -85,8 +86,7 @@ def test_pages_sqlite_cannot_join_are_read_row_by_row(database, engine, reader, 
 
     from wott_hub.history import HistoryReader, create_engine
 
-    if engine.dialect.name != "sqlite":
-        pytest.skip("the joined page is SQLite's")
+    assert engine.dialect.name == "sqlite"
     with engine.begin() as conn:  # payloads as text, as revision 0005 stored them
         conn.execute(sa.text("UPDATE events SET data = CAST(data AS TEXT) WHERE seq = :s"),
                      {"s": recorded[51].seq})
