@@ -145,10 +145,13 @@ def _joined_page(raw: sqlite3.Connection, key: int, after: int, upto: int, t_fro
 def decode_rows(rows: Sequence[Sequence[Any]]) -> list[tuple[int, int, int, str, str]]:
     """(seq, t_ns, kind, name, stored) rows with the text sent live for ``stored``; the packets
     of the rows are decoded together, the columns moved by C-level ``zip``s."""
-    if not rows:
-        return []
+    return list(zip(*_columns(rows), strict=True)) if rows else []
+
+
+def _columns(rows: Sequence[Sequence[Any]]) -> Columns:
+    """``decode_rows`` as ``Columns`` (``rows`` not empty)."""
     seqs, times, kinds, names, stored = zip(*rows, strict=True)
-    return list(zip(seqs, times, kinds, names, decode_many(stored, times), strict=True))
+    return Columns(seqs, times, kinds, names, decode_many(stored, times))
 
 
 class Columns(NamedTuple):
@@ -327,8 +330,7 @@ class HistoryReader:
                     hi_t = t_to_ns if t_to_ns is not None else 1 << 63
                     rows = [r for r in rows if lo_t <= r[1] <= hi_t and (not names or r[3] in names)]
                 if rows:
-                    seqs, times, kinds, names_, stored = zip(*rows, strict=True)
-                    yield Columns(seqs, times, kinds, names_, decode_many(stored, times))
+                    yield _columns(rows)
         finally:
             if pool is not None:
                 pool.shutdown(wait=False, cancel_futures=True)
