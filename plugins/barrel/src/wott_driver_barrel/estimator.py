@@ -77,10 +77,22 @@ class BarrelEstimator:
         self.reference_px: tuple[np.ndarray, ...] | None = None
         self._detectors: list[MarkerDetector] = []
         self._trackers: list[MarkerTracker] = []
-        self._stereo = self.layout.stereo_maps() if len(self.layout.cameras) == 2 else None
+        self._stereo: np.ndarray | None = None
+        self._prepared = False
         self.available: tuple[np.ndarray, ...] | None = None  # per camera (M,) bool; None: all seen
         self._unknown = np.zeros(self.layout.mesh.n_nodes, dtype=bool)
         self._checked = self.reference != "model"  # "model": the first frame says which markers are there
+
+    def prepare(self) -> None:
+        """Build the stereo maps, detectors and trackers (once; OpenCV and SciPy imported here).
+
+        Called by the first ``set_reference``/``features``, i.e. in the driver's worker thread
+        when frames start, not when the device is opened: the hub serves the device's TD without
+        waiting ~0.4 s for them (docs/hub.md, "Start-up")."""
+        if self._prepared:
+            return
+        self._prepared = True
+        self._stereo = self.layout.stereo_maps() if len(self.layout.cameras) == 2 else None
         if self.reference == "model" and self.uses_markers:
             self._set_reference(self.layout.reference_px)
 
@@ -124,6 +136,7 @@ class BarrelEstimator:
         from wott_vision.markers import MarkerDetector
         from wott_vision.reference import match_expected
 
+        self.prepare()
         opts = {k: v for k, v in self.detector.items() if k != "mask"}
         if not self._checked:
             self._check_model_reference(images, MarkerDetector(**opts))
@@ -181,6 +194,7 @@ class BarrelEstimator:
 
     def features(self, images: tuple[np.ndarray, ...]) -> tuple[np.ndarray, int, tuple[np.ndarray, ...]]:
         """(model input (F,), markers lost, tracked positions per camera)."""
+        self.prepare()
         if self.reference_px is None:
             raise ReferenceNotFound("no reference yet")
         motion, seen, lost, tracked = [], [], 0, []

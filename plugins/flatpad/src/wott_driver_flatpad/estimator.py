@@ -20,6 +20,7 @@ in-plane to ``max_shear_mm``, depth to the gel's thickness.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
@@ -95,7 +96,7 @@ class PadEstimator:
         self.depth_model = depth_model or DepthModel.physical(layout.optics)
         self.depth = depth
         self.nonlinear_passes = int(nonlinear_passes)
-        self.solver = ParallaxSolver(layout, parallax) if depth else None
+        self._parallax = parallax
         area = np.pi * layout.marker_radius_px**2
         self.detect_kwargs: _DetectArgs = {"min_area": max(2, int(0.15 * area)),
                                            "max_area": int(6 * area) + 16}
@@ -108,6 +109,13 @@ class PadEstimator:
         self.available: np.ndarray | None = None  # (M,) bool; None: every marker seen at rest
         self.max_depth_mm = float(layout.optics.gel_mm)
         self.max_shear_mm = float(layout.optics.gel_mm)  # a gel sheared further than it is thick tears
+
+    @cached_property
+    def solver(self) -> ParallaxSolver | None:
+        """The depth solver (None without ``depth``), factorised on first use: in the driver's worker
+        thread when frames start, not when the device is opened (SciPy's import and the
+        factorisation, ~0.2 s, would delay the hub serving the TD; docs/hub.md, "Start-up")."""
+        return ParallaxSolver(self.layout, self._parallax) if self.depth else None
 
     @property
     def has_reference(self) -> bool:
