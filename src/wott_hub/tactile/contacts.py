@@ -91,6 +91,15 @@ def group_patches(mesh: SkinMesh, nodes: np.ndarray) -> tuple[np.ndarray, np.nda
     return np.array(grouped, dtype=np.int64), np.array(sizes, dtype=np.int64)
 
 
+_FIRST = np.zeros(1, dtype=np.intp)  # ``starts`` of a single patch
+_FIRST.setflags(write=False)
+
+
+def _node_table(mesh: SkinMesh) -> np.ndarray:
+    """Per node, what a patch's statistics gather, (1, position | normal): one gather for both."""
+    return np.column_stack([np.ones(mesh.n_nodes), mesh.nodes, mesh.normals])
+
+
 class _Patches:
     """One deformed set split into patches, with what the statistics of any frame need of it.
 
@@ -98,30 +107,42 @@ class _Patches:
     array, weight x (1, position) | tangential displacement | normal depth, so
     one ``reduceat`` sums them all; a column sums exactly as the same values
     would alone, so the numbers are those of one reduction per statistic. The
-    array is kept here and refilled each frame.
+    array is kept here and refilled each frame. The nodes' constants come from
+    one gather of the finder's ``_node_table`` (a moving press makes a new set
+    almost every frame, and pays this set-up each time).
     """
 
     __slots__ = ("bounds", "counts", "depth", "nodes", "normals", "order", "patches", "positions", "starts",
                  "stiffness", "tangential", "terms", "weighted")
 
-    def __init__(self, mesh: SkinMesh, deformed: np.ndarray, force_model: ForceModel) -> None:
+    def __init__(self, mesh: SkinMesh, deformed: np.ndarray, force_model: ForceModel,
+                 table: np.ndarray) -> None:
         nodes, counts = group_patches(mesh, deformed)
         nodes.setflags(write=False)  # shared by the contacts of every frame that reuses this split
         self.nodes = nodes
-        # where each of ``nodes`` sits in the deformed set; None: in the same place (one patch)
-        self.order = None if len(counts) == 1 else np.searchsorted(deformed, nodes)
-        ends = np.cumsum(counts)
-        self.starts = ends - counts
-        self.counts = counts[:, None].astype(np.float64)
-        self.bounds = bounds = list(zip(self.starts.tolist(), ends.tolist(), strict=True))
-        self.patches = [nodes[a:b] for a, b in bounds]
-        self.positions = np.column_stack([np.ones(len(nodes)), mesh.nodes[nodes]])
-        self.normals = mesh.normals[nodes]
+        self.counts: np.ndarray | float
+        if len(counts) == 1:  # one patch (the common case): no reordering, no bounds to compute
+            self.order = None
+            self.starts = _FIRST
+            self.counts = float(len(nodes))
+            self.bounds = [(0, len(nodes))]
+            self.patches = [nodes]
+        else:
+            # where each of ``nodes`` sits in the deformed set
+            self.order = np.searchsorted(deformed, nodes)
+            ends = np.cumsum(counts)
+            self.starts = ends - counts
+            self.counts = counts[:, None].astype(np.float64)
+            self.bounds = list(zip(self.starts.tolist(), ends.tolist(), strict=True))
+            self.patches = [nodes[a:b] for a, b in self.bounds]
+        rows = table[nodes]
+        self.positions, self.normals = rows[:, :4], rows[:, 4:]
         # the Winkler force is a product with the patch's spring constants: gathered once here
+        # (contiguous: a strided vector takes another BLAS path, whose last bit may differ)
         self.stiffness: list[np.ndarray] | None = None
         if isinstance(force_model, WinklerForceModel):
             k = force_model.node_stiffness[nodes]
-            self.stiffness = [k[a:b] for a, b in bounds]
+            self.stiffness = [k[a:b] for a, b in self.bounds]
         self.terms = np.empty((len(nodes), 8))
         self.weighted, self.tangential, self.depth = self.terms[:, :4], self.terms[:, 4:7], self.terms[:, 7]
 
@@ -179,8 +200,8 @@ def find_contacts(
     """
     if deformed.size == 0:
         return []
-    return _contacts(_Patches(mesh, deformed, force_model), intensity[deformed], displacement, force_model,
-                     min_nodes)
+    return _contacts(_Patches(mesh, deformed, force_model, _node_table(mesh)), intensity[deformed],
+                     displacement, force_model, min_nodes)
 
 
 class ContactFinder:
@@ -195,6 +216,7 @@ class ContactFinder:
 
     def __init__(self, mesh: SkinMesh, force_model: ForceModel, min_nodes: int = 1) -> None:
         self.mesh, self.force_model, self.min_nodes = mesh, force_model, min_nodes
+        self._table = _node_table(mesh)
         self._key = b""
         self._patches: _Patches | None = None
 
@@ -205,6 +227,6 @@ class ContactFinder:
         key = deformed.tobytes()
         p = self._patches
         if p is None or key != self._key:
-            p = self._patches = _Patches(self.mesh, deformed, self.force_model)
+            p = self._patches = _Patches(self.mesh, deformed, self.force_model, self._table)
             self._key = key
         return _contacts(p, norms, displacement, self.force_model, self.min_nodes, peak)
