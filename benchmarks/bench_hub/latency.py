@@ -28,7 +28,7 @@ __all__ = ["DEFAULT_DEVICES", "DEFAULT_WORKERS", "QUICK_DEVICES", "REPEATED", "l
 DEFAULT_DEVICES = (1, 8, 32, 64)
 QUICK_DEVICES = (1, 8)
 REPEATED = (32, 64)  # the targets' points: repeated, the median run shown (this machine is noisy)
-DEFAULT_WORKERS = (1,)  # worker counts of the variant rows (workers = 0 is the main row)
+DEFAULT_WORKERS = (1, 2)  # worker counts of the variant rows (workers = 0 is the main row)
 
 
 def press_frames(desc, n: int):

@@ -44,6 +44,7 @@ Megabytes = Annotated[float, says("a positive number", gt=0, le=1e9)]
 BatchMs = Annotated[float, says("a positive number of milliseconds", gt=0, le=60_000)]
 Seconds = Annotated[float, says("a positive number of seconds", gt=0, le=3_600)]
 Workers = Annotated[int, says("a whole number of processes (0: none)", ge=0, le=MAX_WORKERS)]
+Niceness = Annotated[int, says("a niceness increment (0: the hub's own priority)", ge=0, le=19)]
 DeviceIds = Annotated[tuple[Annotated[str, says("a device id")], ...], says("a list of device ids")]
 BatchMax = Annotated[int, says("a positive integer", ge=1, le=1_000_000)]
 RingSize = Annotated[int, says("a positive integer", ge=1, le=10_000_000)]
@@ -94,6 +95,9 @@ class HubConfig:
     workers: Workers = field(default=0, metadata=doc(
         f"Processes running the devices' drivers and processing (0: in the hub's process; "
         f"at most {MAX_WORKERS})."))
+    worker_nice: Niceness = field(default=10, metadata=doc(
+        "How much lower the workers' CPU priority is than the hub's (Unix nice): on a machine "
+        "without spare cores, the hub's loop (serving clients) then runs first (docs/hub.md)."))
     devices: tuple[Any, ...] = field(default_factory=tuple)  # wott_hub.plugins.DeviceConfig
     directory: DirectoryConfig = field(default_factory=DirectoryConfig)  # [directory]: on by default
     discovery: DiscoveryConfig = field(default_factory=DiscoveryConfig.off)  # [discovery]: files turn mDNS on

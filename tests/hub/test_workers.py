@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import time
 
 import httpx
@@ -43,6 +44,9 @@ def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path,
             assert r.skin.intensity.tolist() == [n["deformedNodeIntensity"] for n in nodes]
         health = httpx.get(f"{hub.td_url('hub')}/properties/health").json()
         assert health["devices"]["pad"]["frames"] > 0
+        # below the hub's CPU priority by [hub] worker_nice (default 10): its loop runs first
+        own = os.getpriority(os.PRIO_PROCESS, 0)
+        assert [os.getpriority(os.PRIO_PROCESS, p.pid) for p in hub.pool.procs] == [min(own + 10, 19)]
     finally:
         ht.stop()
     assert not any(p.is_alive() for p in hub.pool.procs)  # the workers are gone

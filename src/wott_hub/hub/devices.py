@@ -88,7 +88,7 @@ class Devices:
         if cfg.workers > 0 and cfg.devices:
             from .workers import WorkerPool  # multiprocessing only when it is used
 
-            self.pool = WorkerPool(cfg.workers, self.on_worker_message)
+            self.pool = WorkerPool(cfg.workers, self.on_worker_message, cfg.worker_nice)
         for dcfg in cfg.devices:
             try:
                 await self.add_device(dcfg, run=False)

@@ -17,6 +17,12 @@ hub's at 32 devices x 120 Hz; batched, ~30 µs each). Any other message flushes 
 records first: a device's records, and its ``ended``, a health report or an ``acted`` after
 them, keep their order.
 
+A worker runs at a lower CPU priority than the hub (``[hub] worker_nice``, 10 by default): on a
+machine with no spare core the kernel then runs the hub's loop (numbering, history, the
+subscribers' sockets) as soon as it has work, and the workers take what is left. At the same
+priority, a worker that had the core kept the hub's records waiting for tens of ms (docs/hub.md,
+"Worker processes").
+
 Protocol (pickled tuples on a ``multiprocessing`` pipe):
 
 - hub -> worker: ``("open", DeviceConfig)``, ``("run", id, trace)``, ``("close_device", id)``,
@@ -49,6 +55,7 @@ import asyncio
 import contextlib
 import logging
 import multiprocessing as mp
+import os
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -130,7 +137,7 @@ class WorkerDevice:
 
 
 class WorkerPool:
-    def __init__(self, n: int, on_message: Callable[[tuple[Any, ...]], None]) -> None:
+    def __init__(self, n: int, on_message: Callable[[tuple[Any, ...]], None], nice: int = 0) -> None:
         ctx = mp.get_context("spawn")  # no fork of a running event loop and its sockets
         self.on_message = on_message
         self.procs: list[mp.process.BaseProcess] = []
@@ -143,7 +150,8 @@ class WorkerPool:
         self._loop = asyncio.get_running_loop()
         for i in range(n):
             parent, child = ctx.Pipe(duplex=True)
-            proc = ctx.Process(target=worker_main, args=(child,), name=f"wott-hub-worker-{i}", daemon=True)
+            proc = ctx.Process(target=worker_main, args=(child, nice), name=f"wott-hub-worker-{i}",
+                               daemon=True)
             proc.start()
             child.close()
             self.procs.append(proc)
@@ -326,8 +334,11 @@ class PipeSink:
             self._recs = []
 
 
-def worker_main(conn: mp.connection.Connection) -> None:
+def worker_main(conn: mp.connection.Connection, nice: int = 0) -> None:
+    """A worker process: ``nice`` lowers its CPU priority below the hub's (``[hub] worker_nice``)."""
     logging.basicConfig(level=logging.WARNING)
+    if nice:
+        os.nice(nice)
     with contextlib.suppress(KeyboardInterrupt):  # the hub handles Ctrl-C and tells us to close
         asyncio.run(_worker(conn))
 
