@@ -339,7 +339,12 @@ def _read_id_column(path: Path) -> np.ndarray:
 
 
 def taclink_barrel() -> SkinMesh:
-    """The TacLink barrel shipped with the package (a copy of the MIT-licensed SimTacLS mesh)."""
-    return load_taclink_barrel(
-        TACLINK_DATA / "barrel_skin.vtk", TACLINK_DATA / "node_idx.csv", TACLINK_DATA / "label_idx.csv"
-    )
+    """The TacLink barrel shipped with the package: the MIT-licensed SimTacLS mesh.
+
+    Shipped as the arrays ``load_taclink_barrel`` reads from its ``barrel_skin.vtk``,
+    ``node_idx.csv`` and ``label_idx.csv`` (NumPy's .npz), not as those files: a hub that
+    opens a barrel then does not import meshio (~0.3 s of start-up before the TDs are
+    served). tests/tactile/test_mesh.py checks it against the original files (../shared/data).
+    """
+    with np.load(TACLINK_DATA / "barrel_skin.npz") as arrays:
+        return SkinMesh(arrays["nodes"], arrays["cells"], arrays["free"], "taclink-barrel")
