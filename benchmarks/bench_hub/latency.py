@@ -128,7 +128,8 @@ def scene_configs(n: int) -> list:
 
 
 async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool = True,
-                       workers: int = 0, precomputed: bool = False, durability: str = "fast") -> dict:
+                       workers: int = 0, precomputed: bool = False, durability: str = "fast",
+                       worker_nice: int | None = None) -> dict:
     """``precomputed``: each device's FrameProcessor is replaced by a lookup of results computed
     beforehand, to measure the hub's own path (plane, history, fan-out, sockets) alone."""
     from dataclasses import replace
@@ -140,7 +141,8 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
 
     devices = tuple(scene_configs(n_dev)) if workers else ()
     hub = Hub(HubConfig(http_port=0, ws_port=0, database=str(tmp / f"lat{n_dev}-{workers}.db"),
-                        workers=workers, devices=devices, history_durability=durability))
+                        workers=workers, devices=devices, history_durability=durability,
+                        **({} if worker_nice is None else {"worker_nice": worker_nice})))
     plane = hub_plane(hub)
     plane.trace = True
     await hub.start()
@@ -310,7 +312,8 @@ async def latency_plain(n_dev: int, duration: float) -> dict:
 async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
               duration: float | None = None, workers: tuple[int, ...] | None = None) -> dict:
     """Every point of ``devices`` (default 1, 8, 32, 64; 1, 8 when quick); the report's rows.
-    Points from 8 devices on also run once per count of ``workers`` (default 1), with the
+    Points from 8 devices on also run once per count of ``workers`` (default 1 and 2), the
+    most workers once more with ``worker_nice = 0`` (at the hub's CPU priority), with the
     processing precomputed, and with ``history_durability = "committed"`` (its latency cost:
     a subscriber gets a record only once its batch is in history, docs/reliability.md)."""
     dur = duration if duration is not None else (2.0 if quick else 6.0)
@@ -332,7 +335,11 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
                      cell((p["published"], p["ws_received"], p["ws_p50"], p["ws_p99"])) if p
                      else "not run (saturated at 8)", cpu_cell(r)])
         if n >= 8 and not quick or n == 8:
-            variants = [(f"workers = {w}", {"workers": w}) for w in workers or DEFAULT_WORKERS]
+            counts = workers or DEFAULT_WORKERS
+            variants = [(f"workers = {w}", {"workers": w}) for w in counts]
+            # the most workers again at the hub's own CPU priority: what [hub] worker_nice buys
+            variants.append((f"workers = {max(counts)}, worker_nice = 0", {"workers": max(counts),
+                                                                          "worker_nice": 0}))
             for label, kw in (*variants, ("processing precomputed", {"precomputed": True}),
                               ("history_durability = committed", {"durability": "committed"})):
                 print(f"latency: {n} devices, {label} ...", flush=True)
