@@ -3,7 +3,7 @@
 A hub whose devices have no cameras never imports cv2 or onnxruntime; a camera skin
 imports OpenCV and SciPy (and builds its detectors, trackers, depth solver) only when its
 frames start, in its worker thread, not when it is opened: the hub serves every TD
-first (docs/hub.md, "Start-up")."""
+first (docs/hub.md, "Start-up and bytecode")."""
 
 from __future__ import annotations
 

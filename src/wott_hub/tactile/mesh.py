@@ -343,8 +343,9 @@ def taclink_barrel() -> SkinMesh:
 
     Shipped as the arrays ``load_taclink_barrel`` reads from its ``barrel_skin.vtk``,
     ``node_idx.csv`` and ``label_idx.csv`` (NumPy's .npz), not as those files: a hub that
-    opens a barrel then does not import meshio (~0.3 s of start-up before the TDs are
-    served). tests/tactile/test_mesh.py checks it against the original files (../shared/data).
+    opens a barrel then does not import meshio (0.1-0.3 s of start-up before the TDs
+    are served, on this 2-core machine). tests/tactile/test_mesh.py checks it against the
+    original files (../shared/data).
     """
     with np.load(TACLINK_DATA / "barrel_skin.npz") as arrays:
         return SkinMesh(arrays["nodes"], arrays["cells"], arrays["free"], "taclink-barrel")

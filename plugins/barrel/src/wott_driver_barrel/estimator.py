@@ -88,7 +88,7 @@ class BarrelEstimator:
 
         Called by the first ``set_reference``/``features``, i.e. in the driver's worker thread
         when frames start, not when the device is opened: the hub serves the device's TD without
-        waiting ~0.4 s for them (docs/hub.md, "Start-up")."""
+        waiting ~0.4 s for them (docs/hub.md, "Start-up and bytecode")."""
         if self._prepared:
             return
         self._prepared = True

@@ -114,7 +114,8 @@ class PadEstimator:
     def solver(self) -> ParallaxSolver | None:
         """The depth solver (None without ``depth``), factorised on first use: in the driver's worker
         thread when frames start, not when the device is opened (SciPy's import and the
-        factorisation, ~0.2 s, would delay the hub serving the TD; docs/hub.md, "Start-up")."""
+        factorisation, ~0.2 s, would delay the hub serving the TD; docs/hub.md, "Start-up and
+        bytecode")."""
         return ParallaxSolver(self.layout, self._parallax) if self.depth else None
 
     @property
