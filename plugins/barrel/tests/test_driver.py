@@ -12,7 +12,7 @@ from wott_driver_barrel.settings import demo_scene_path, open_barrel
 from wott_driver_barrel.simulator import BarrelSimulator
 from wott_driver_barrel.training import rmse_mm
 
-from wott_hub.drivers.base import Health
+from wott_hub.drivers.base import DriverError, Health
 from wott_hub.sim.scene import Scene
 
 # Stated tolerance (docs/barrel-vision.md): on the demo scene at 30 fps through the whole chain
@@ -231,3 +231,13 @@ def test_a_missing_camera_device_is_reported_and_retried():
     health = asyncio.run(asyncio.wait_for(go(), 20))
     assert health.state is Health.disconnected
     assert health.reason.startswith("bottom camera: cannot open camera device 63")
+
+
+@pytest.mark.parametrize(("settings", "message"), [
+    ({"detector": {"min_area": 50, "max_area": 10}}, "detector: need 0 < min_area <= max_area"),
+    ({"tracker": {"max_gate_px": 0.5}}, "tracker.max_gate_px"),
+])
+def test_bad_detector_and_tracker_settings_are_refused_when_the_device_opens(settings, message):
+    # the detectors and trackers themselves are built at the first frame (BarrelEstimator.prepare)
+    with pytest.raises(DriverError, match=message):
+        open_barrel("b1", settings)

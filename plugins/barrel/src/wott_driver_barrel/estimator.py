@@ -72,8 +72,16 @@ class BarrelEstimator:
     mask_margin_px: float = 18.0
 
     def __post_init__(self) -> None:
+        from wott_vision.markers import MarkerDetector  # NumPy only: OpenCV comes with the first image
+
         if self.reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
+        # the detectors are built at the first frame (prepare); their options are checked now, so
+        # that a bad combination (min_area > max_area) is refused when the device is opened
+        try:
+            MarkerDetector(**{k: v for k, v in self.detector.items() if k != "mask"})
+        except ValueError as e:
+            raise ValueError(f"detector: {e}") from None
         self.reference_px: tuple[np.ndarray, ...] | None = None
         self._detectors: list[MarkerDetector] = []
         self._trackers: list[MarkerTracker] = []

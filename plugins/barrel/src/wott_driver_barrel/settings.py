@@ -76,7 +76,8 @@ class TrackerTable(SettingsTable, frozen=True):
 
     gate_fraction: Annotated[float, Meta(gt=0, le=1, description=(
         "Search radius as a fraction of the marker spacing."))] = 0.45
-    max_gate_px: Annotated[float, Meta(gt=0, le=1000, description="Largest search radius, px.")] = 25.0
+    max_gate_px: Annotated[float, Meta(ge=1, le=1000, description=(
+        "Largest search radius, px (at least the smallest, 1 px)."))] = 25.0
     predict: Annotated[bool, Meta(description="Search where the last velocity carries each marker.")] = False
     merge_ratio: Annotated[float, Meta(gt=1, le=10, description=(
         "A blob this many times its marker's rest area is two markers."))] = 1.45
