@@ -53,8 +53,9 @@ def test_a_page_with_plain_onmessage_receives_events_of_each_kind(fleet, browser
         page.wait_for_function("window.sources.every((s) => s.readyState === EventSource.OPEN)",
                                timeout=15_000)
         scripted_press("late-browser")  # joins, presses, ends: healthChange
-        page.wait_for_function(
-            "Object.entries(window.got).every(([k, g]) => k === 'all' ? g.named > 0 : g.n > 0)",
+        page.wait_for_function(  # another device's health may change first (a shared fleet)
+            "Object.entries(window.got).every(([k, g]) => k === 'all' ? g.named > 0 : g.n > 0)"
+            " && window.got.healthChange.data.some((h) => h.device === 'late-browser')",
             timeout=20_000)
         page.evaluate("window.sources.forEach((s) => s.close())")
         got = page.evaluate("window.got")
