@@ -129,7 +129,7 @@ def scene_configs(n: int) -> list:
 
 async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool = True,
                        workers: int = 0, precomputed: bool = False, durability: str = "fast",
-                       worker_nice: int | None = None) -> dict:
+                       worker_nice: int | None = None, history_process: bool = True) -> dict:
     """``precomputed``: each device's FrameProcessor is replaced by a lookup of results computed
     beforehand, to measure the hub's own path (plane, history, fan-out, sockets) alone."""
     from dataclasses import replace
@@ -142,6 +142,7 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
     devices = tuple(scene_configs(n_dev)) if workers else ()
     hub = Hub(HubConfig(http_port=0, ws_port=0, database=str(tmp / f"lat{n_dev}-{workers}.db"),
                         workers=workers, devices=devices, history_durability=durability,
+                        history_process=history_process,
                         **({} if worker_nice is None else {"worker_nice": worker_nice})))
     plane = hub_plane(hub)
     plane.trace = True
@@ -314,8 +315,9 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
     """Every point of ``devices`` (default 1, 8, 32, 64; 1, 8 when quick); the report's rows.
     Points from 8 devices on also run once per count of ``workers`` (default 1 and 2), the
     most workers once more with ``worker_nice = 0`` (at the hub's CPU priority), with the
-    processing precomputed, and with ``history_durability = "committed"`` (its latency cost:
-    a subscriber gets a record only once its batch is in history, docs/reliability.md)."""
+    processing precomputed, with ``history_durability = "committed"`` (its latency cost:
+    a subscriber gets a record only once its batch is in history, docs/reliability.md), and with
+    ``history_process = false`` (batches written by the writer's thread, docs/history.md)."""
     dur = duration if duration is not None else (2.0 if quick else 6.0)
     points = devices or (QUICK_DEVICES if quick else DEFAULT_DEVICES)
     rows, stage_rows, variant_rows, repeats = [], [], [], []
@@ -341,7 +343,8 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
             variants.append((f"workers = {max(counts)}, worker_nice = 0", {"workers": max(counts),
                                                                           "worker_nice": 0}))
             for label, kw in (*variants, ("processing precomputed", {"precomputed": True}),
-                              ("history_durability = committed", {"durability": "committed"})):
+                              ("history_durability = committed", {"durability": "committed"}),
+                              ("history_process = false", {"history_process": False})):
                 print(f"latency: {n} devices, {label} ...", flush=True)
                 w = await latency_ours(n, dur, tmp, with_wotpy=False, **kw)
                 variant_rows.append([n, label, f"{w['sse'][0] / dur:.0f} / {n * 120}", cell(w["sse"]),

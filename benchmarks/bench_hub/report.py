@@ -74,7 +74,8 @@ def startup(res: dict) -> str:
             "script, trials alternated.\n\n"
             + markdown_table(["launcher", "trial", "TDs served (s)", "ready (s)", "devices"], rows)
             + "\n\nThe demo at rest (ready, no client, its simulated devices playing their looping scenes), "
-            f"over {rest['seconds']:g} s: CPU {rest['cpu_pct']:.0f} % of one core, resident memory "
+            f"over {rest['seconds']:g} s, the hub and its {rest.get('processes', 1) - 1} child process(es) "
+            f"(the history writer's): CPU {rest['cpu_pct']:.0f} % of one core, resident memory "
             f"{rest['rss_mib']:.0f} MiB (peak {rest['peak_mib']:.0f} MiB).")
 
 

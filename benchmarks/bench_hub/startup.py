@@ -93,7 +93,8 @@ def summary(trials: dict[str, list]) -> dict[str, tuple[float, float]]:
 
 def at_rest(seconds: float = REST_S) -> dict[str, float]:
     """The demo (venv script, so the process measured is the hub) once ready and settled for 5 s:
-    its CPU over ``seconds`` (% of one core) and its resident memory (MiB) at the end."""
+    its CPU over ``seconds`` (% of one core) and its resident memory (MiB) at the end, its child
+    processes (the history writer's) counted in, the peak as the sum of each one's."""
     port, ws_port = _ports()
     with tempfile.TemporaryDirectory() as cwd:
         proc = subprocess.Popen([*launch_command("venv script"), "run", "--port", str(port), "--ws-port",
@@ -103,17 +104,31 @@ def at_rest(seconds: float = REST_S) -> dict[str, float]:
             assert proc.stdout is not None
             proc.stdout.readline()  # the --json line: ready
             time.sleep(5.0)
-            cpu0, t0 = _cpu_s(proc.pid), time.monotonic()
+            pids = _tree(proc.pid)
+            cpu0, t0 = sum(map(_cpu_s, pids)), time.monotonic()
             time.sleep(seconds)
-            cpu1, t1 = _cpu_s(proc.pid), time.monotonic()
-            status = Path(f"/proc/{proc.pid}/status").read_text()
+            cpu1, t1 = sum(map(_cpu_s, pids)), time.monotonic()
+            kib = [_memory_kib(pid) for pid in pids]
         finally:
             proc.terminate()
             proc.wait(30)
-    kib = {k: int(v.split()[0]) for k, v in (line.split(":", 1) for line in status.splitlines())
-           if k in ("VmRSS", "VmHWM")}
-    return {"cpu_pct": 100 * (cpu1 - cpu0) / (t1 - t0), "rss_mib": kib["VmRSS"] / 1024,
-            "peak_mib": kib["VmHWM"] / 1024, "seconds": seconds}
+    return {"cpu_pct": 100 * (cpu1 - cpu0) / (t1 - t0), "rss_mib": sum(k["VmRSS"] for k in kib) / 1024,
+            "peak_mib": sum(k["VmHWM"] for k in kib) / 1024, "seconds": seconds, "processes": len(pids)}
+
+
+def _tree(pid: int) -> list[int]:
+    """``pid`` and its descendants."""
+    out = [pid]
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            out += _tree(int(child))
+    return out
+
+
+def _memory_kib(pid: int) -> dict[str, int]:
+    status = Path(f"/proc/{pid}/status").read_text()
+    return {k: int(v.split()[0]) for k, v in (line.split(":", 1) for line in status.splitlines())
+            if k in ("VmRSS", "VmHWM")}
 
 
 def _cpu_s(pid: int) -> float:

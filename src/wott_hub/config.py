@@ -84,6 +84,9 @@ class HubConfig:
     history_durability: Durability = field(default="fast", metadata=doc(
         "fast: subscribers get a record as soon as it is made, before its batch commits (a crash "
         "can lose what they saw); committed: only once it is in history (docs/reliability.md)."))
+    history_process: Flag = field(default=True, metadata=doc(
+        "Encode and write the history batches in a process of their own (off the event loop's "
+        "GIL; docs/history.md); false: in a thread of the hub's process."))
     history_skip: DeviceIds = field(default=(), metadata=doc(
         "Device ids whose events are served live but not recorded."))
     ring_size: RingSize = field(default=4096, metadata=doc(

@@ -42,6 +42,19 @@ class SkinArrays(NamedTuple):
     ids: np.ndarray
     intensity: np.ndarray
 
+    def to_wire(self) -> tuple[bytes, bytes]:
+        """The arrays as raw bytes, to cross a pipe (pickling two ndarrays costs ~4x more on each side)."""
+        import numpy as np
+
+        return (self.ids.astype(np.int64, copy=False).tobytes(),
+                self.intensity.astype(np.float64, copy=False).tobytes())
+
+    @classmethod
+    def from_wire(cls, wire: tuple[bytes, bytes]) -> SkinArrays:
+        import numpy as np
+
+        return cls(np.frombuffer(wire[0], np.int64), np.frombuffer(wire[1], np.float64))
+
 
 class Record:
     """``seq`` is per Thing, strictly increasing, never reused (see EventPlane).

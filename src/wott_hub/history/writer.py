@@ -24,6 +24,9 @@ Contract (what keeps the writer from ever wedging):
   row was refused, and while the database is known to be corrupted
   (``PRAGMA quick_check`` at start, or a read error); "failed" once another
   process took the writer lease (this writer then records nothing more).
+- With ``process=True`` (the hub's ``history_process``, on by default) each batch is encoded
+  and written by a process of its own (``batch_process.py``), off the GIL of the process that
+  submits; the rest stays here. A process that exits fails the batch in hand, which is retried.
 - The writer takes its hub's lease in the database (``lease.py``, keyed by
   ``hub_id``) before its first Thing is registered, refreshes it, and releases
   it at a clean stop: a second process of the same hub id on the same database
@@ -33,10 +36,8 @@ Contract (what keeps the writer from ever wedging):
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
-import struct
 import threading
 import time
 from collections import deque
@@ -49,8 +50,10 @@ from sqlalchemy.engine import Engine
 from wott_hub.errors import Conflict, InvalidInput
 from wott_hub.events.record import Record
 
+from .batch_process import BatchProcess, BatchProcessError, BatchRefused
 from .codec import encode_records
 from .db import HistoryError, check_integrity, describe
+from .inserts import DATA_ERRORS, Inserter, Prepared, Row, copy_data, one_line
 from .lease import DEFAULT_HUB_ID, LEASE_STALE_S, Lease, live_holder
 from .models import EventRow, ThingRow
 from .retention import Retention, apply_retention
@@ -66,17 +69,6 @@ RESERVE = 1 << 20
 Records handed out but not yet committed stay below the reservation as long
 as fewer than this many of one Thing wait in the queue (``queue_max`` keeps it so)."""
 
-_COLUMNS = ("thing_key", "seq", "t_ns", "kind", "name", "data")
-_Row = tuple[int, int, int, int, str, bytes]  # the values of _COLUMNS
-_Prepared = tuple[list[_Row], bytearray]  # a batch's rows and their COPY data (_copy_data)
-
-_COPY_HEAD = struct.Struct(">hiiiqiqih")
-"""A binary COPY row up to its name: the field count, then each field's length and value for
-``thing_key`` int4, ``seq`` int8, ``t_ns`` int8, ``kind`` int2 (models.EventRow)."""
-_COPY_LEN = struct.Struct(">i")
-_COPY_SIGNATURE = b"PGCOPY\n\xff\r\n\x00" + bytes(8)  # then flags and header extension length, 0
-_COPY_TRAILER = b"\xff\xff"  # a field count of -1
-
 _AHEAD_MIN = 1_000
 """Records that must wait behind a batch for the writer to take the next batch and encode it
 while PostgreSQL writes this one: below that the writer is keeping up."""
@@ -84,41 +76,12 @@ _ENCODE_SLICE = 1_000
 """Records encoded per step of ``_Ahead``: about 4 ms, well under the ~20 ms of work that a
 socket's buffer of COPY data gives PostgreSQL (and no dearer per record than a whole batch)."""
 
-_DATA_ERRORS = (sa.exc.IntegrityError, sa.exc.DataError)
-"""Errors about the rows themselves: retrying the same rows can never succeed; isolate them."""
-
-
 class _Refused(Exception):
     """A record that cannot be written at all (its Thing was never registered)."""
 
 
-def positional_insert(engine: Engine, table: str, columns: tuple[str, ...], rows: int = 1) -> str | None:
-    """An INSERT of ``rows`` rows in the driver's own positional paramstyle, taking the rows'
-    values as one flat tuple; None if the paramstyle is not positional (use executemany).
-
-    SQLAlchemy's Core insert would build a dict per row and process each value in
-    Python; tuples go straight to the driver (3-4x faster on SQLite). Many rows per
-    statement matter as much: the sqlite3 module releases the GIL around each
-    statement step, and a thread that gets the GIL back only after the event loop's
-    switch interval (5 ms) would take seconds to insert a batch row by row while
-    holding the database's write lock, starving every other writer.
-    """
-    style = engine.dialect.paramstyle
-    n = len(columns)
-    if style == "qmark":
-        groups = ["(" + ", ".join(["?"] * n) + ")"] * rows
-    elif style in ("format", "pyformat"):
-        groups = ["(" + ", ".join(["%s"] * n) + ")"] * rows
-    elif style in ("numeric", "numeric_dollar"):
-        mark = ":" if style == "numeric" else "$"
-        groups = ["(" + ", ".join(f"{mark}{r * n + i + 1}" for i in range(n)) + ")" for r in range(rows)]
-    else:  # named: not positional
-        return None
-    return f"INSERT INTO {table} ({', '.join(columns)}) VALUES {', '.join(groups)}"
-
-
-def _named_insert(table: str, columns: tuple[str, ...]) -> str:
-    return f"INSERT INTO {table} ({', '.join(columns)}) VALUES ({', '.join(':' + c for c in columns)})"
+def _unregistered(e: KeyError) -> _Refused:
+    return _Refused(f"Thing {e.args[0]!r} was never registered with the history writer")
 
 
 class HistoryWriter:
@@ -128,7 +91,7 @@ class HistoryWriter:
                  queue_max: int = RESERVE // 2, retention: Retention | None = None,
                  on_commit: Callable[[dict[str, int]], None] | None = None,
                  lease_stale_s: float = LEASE_STALE_S, integrity_check: bool = True,
-                 hub_id: str = DEFAULT_HUB_ID, compact: bool = True) -> None:
+                 hub_id: str = DEFAULT_HUB_ID, compact: bool = True, process: bool = False) -> None:
         """``hub_id``: the identity of the hub this writer records for (its lease row, see
         ``lease.py``): hubs of different ids may share one database, each its own Things.
         ``compact``: skin packets stored packed (``codec.py``); False stores every payload as
@@ -167,14 +130,8 @@ class HistoryWriter:
         self._wake = threading.Event()
         self._stop = False
         self._thread: threading.Thread | None = None
-        # rows per statement: SQLite before 3.32 allows 999 parameters, later 32766
-        import sqlite3
-
-        max_params = 999 if engine.dialect.name == "sqlite" and sqlite3.sqlite_version_info < (3, 32) \
-            else 30_000
-        self._chunk = max(1, min(1000, max_params // len(_COLUMNS)))
-        self._insert_full = positional_insert(engine, EventRow.__tablename__, _COLUMNS, self._chunk)
-        self._copy = engine.dialect.name == "postgresql" and engine.dialect.driver == "psycopg"
+        self._inserter = Inserter(engine)
+        self._process = BatchProcess(engine.url) if process else None  # batch_process.py
         self.compact = compact
         self._next_retention = 0.0
 
@@ -325,6 +282,8 @@ class HistoryWriter:
             log.error("history writer did not finish within %.0f s; %d records not written",
                       timeout_s, len(self._queue))
         self._thread = None
+        if self._process is not None:
+            self._process.close()
         self._release_reservations()
         try:
             self.lease.release()
@@ -347,6 +306,11 @@ class HistoryWriter:
     def _run(self) -> None:
         backoff = 0.1
         failures_at_stop = 0
+        if self._process is not None:
+            try:
+                self._process.start()
+            except BatchProcessError as e:  # the first batch starts it again, or reports why not
+                log.warning("%s", e)
         while True:
             stopping = self._stop
             try:
@@ -360,7 +324,7 @@ class HistoryWriter:
                         apply_retention(self.engine, self.retention)
             except Exception as e:  # keep recording: a failed batch is logged, the rest retried
                 self.errors += 1
-                self.last_error = _one_line(e)
+                self.last_error = one_line(e)
                 self._failing = True
                 if "database disk image is malformed" in self.last_error:
                     self._db.read_failed(self.last_error)
@@ -411,7 +375,7 @@ class HistoryWriter:
             if not batch:
                 batch, encoded = self._take(), None
             ahead = _Ahead(self._payloads, self._prepare, self._take()) \
-                if self._copy and len(q) >= _AHEAD_MIN else None
+                if self._inserter.copy and self._process is None and len(q) >= _AHEAD_MIN else None
             self._write_isolating(batch, encoded, ahead)
             batch, encoded = ([], None) if ahead is None else (ahead.batch, ahead)
         if batch:  # taken ahead when the lease was lost: back in the queue, given up with it
@@ -438,7 +402,7 @@ class HistoryWriter:
                 try:
                     self._write(part, payloads, None if ahead is None else ahead.step,
                                 prepared if part is batch else None)
-                except _DATA_ERRORS + (_Refused,) as e:
+                except (*DATA_ERRORS, _Refused, BatchRefused) as e:
                     if len(part) == 1:
                         self._refuse(part[0], e)
                         continue
@@ -455,7 +419,7 @@ class HistoryWriter:
     def _refuse(self, rec: Record, e: Exception) -> None:
         self.failed_records += 1
         self._last_refused = time.monotonic()
-        self.last_error = f"{rec.thing} seq {rec.seq} not recorded: {_one_line(e)}"
+        self.last_error = f"{rec.thing} seq {rec.seq} not recorded: {one_line(e)}"
         log.error("history: %s", self.last_error)
         self.failed_seqs.setdefault(rec.thing, set()).add(rec.seq)
         self.committed[rec.thing] = max(self.committed.get(rec.thing, 0), rec.seq)
@@ -466,72 +430,57 @@ class HistoryWriter:
         """The bytes stored for each record's payload."""
         return encode_records(batch) if self.compact else [r.data.encode() for r in batch]
 
-    def _rows(self, batch: Sequence[Record], payloads: list[bytes]) -> list[_Row]:
+    def _rows(self, batch: Sequence[Record], payloads: list[bytes]) -> list[Row]:
         keys = self.keys
         try:
             return [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, d)
                     for r, d in zip(batch, payloads, strict=True)]
         except KeyError as e:
-            raise _Refused(f"Thing {e.args[0]!r} was never registered with the history writer") from None
+            raise _unregistered(e) from None
 
-    def _prepare(self, batch: Sequence[Record], payloads: list[bytes]) -> _Prepared:
+    def _prepare(self, batch: Sequence[Record], payloads: list[bytes]) -> Prepared:
         rows = self._rows(batch, payloads)
-        return rows, _copy_data(rows)
+        return rows, copy_data(rows)
 
     def _write(self, batch: list[Record], payloads: list[bytes] | None = None,
-               meanwhile: Callable[[], bool] | None = None, prepared: _Prepared | None = None) -> None:
-        """One transaction; ``meanwhile``: work to do in steps while PostgreSQL takes the COPY
-        data (it returns False when done); ``prepared``: the batch's rows and COPY data."""
+               meanwhile: Callable[[], bool] | None = None, prepared: Prepared | None = None) -> None:
+        """One transaction, here or in the batch process; ``meanwhile``: work to do in steps while
+        PostgreSQL takes the COPY data (it returns False when done); ``prepared``: the batch's rows
+        and COPY data."""
         t0 = time.perf_counter()
         keys = self.keys
-        copy_data = None
-        if prepared is None:
-            rows = self._rows(batch, self._payloads(batch) if payloads is None else payloads)
+        if self._process is not None:  # the records as they are: the process encodes them
+            try:
+                wire = [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, r.data,
+                         None if r.skin is None else r.skin.to_wire()) for r in batch]
+            except KeyError as e:
+                raise _unregistered(e) from None
+        elif prepared is None:
+            rows, copy = self._rows(batch, self._payloads(batch) if payloads is None else payloads), None
         else:
-            rows, copy_data = prepared
+            rows, copy = prepared
         tops: dict[str, int] = {}
         for r in batch:
             tops[r.thing] = r.seq  # records of one Thing arrive in seq order
-        things = ThingRow.__table__
-        with self.engine.begin() as conn:
-            self._insert_rows(conn, rows, meanwhile, copy_data)
-            for thing, top in tops.items():
-                # Invariant: every seq handed out is <= the reservation. At most queue_max
-                # (<= RESERVE/2) records wait in the queue and two batches are taken from it
-                # (this one and the next, encoded ahead), so moving the reservation when less
-                # than RESERVE/2 + 2 batches is left keeps it (batch_max up to RESERVE/4, as
-                # the default; larger ones move it every batch); one UPDATE per ~450k records.
-                if top > self._reserved[thing] - RESERVE // 2 - 2 * self.batch_max:
-                    conn.execute(things.update().where(things.c.key == keys[thing])
-                                 .values(seq_reserved=top + RESERVE))
-                    self._reserved[thing] = top + RESERVE
+        # Invariant: every seq handed out is <= the reservation. At most queue_max
+        # (<= RESERVE/2) records wait in the queue and two batches are taken from it
+        # (this one and the next, encoded ahead), so moving the reservation when less
+        # than RESERVE/2 + 2 batches is left keeps it (batch_max up to RESERVE/4, as
+        # the default; larger ones move it every batch); one UPDATE per ~450k records.
+        reserve = {thing: top + RESERVE for thing, top in tops.items()
+                   if top > self._reserved[thing] - RESERVE // 2 - 2 * self.batch_max}
+        by_key = [(keys[thing], seq) for thing, seq in reserve.items()]
+        if self._process is not None:
+            self._process.commit(wire, by_key, self.compact)
+        else:
+            self._inserter.commit(rows, by_key, meanwhile, copy)
+        self._reserved.update(reserve)
         self.committed.update(tops)
         self.written += len(batch)
         self.batches += 1
         self.last_batch_s = time.perf_counter() - t0
         if self.on_commit is not None:
             self.on_commit(tops)
-
-    def _insert_rows(self, conn: sa.Connection, rows: list[_Row], meanwhile: Callable[[], bool] | None = None,
-                     copy_data: bytearray | None = None) -> None:
-        table = EventRow.__tablename__
-        if self._copy:
-            _copy_rows(conn, table, rows, meanwhile, copy_data)
-            return
-        if self._insert_full is None:  # a driver with a named paramstyle: executemany
-            conn.exec_driver_sql(_named_insert(table, _COLUMNS), [dict(zip(_COLUMNS, r, strict=True))
-                                                                   for r in rows])
-            return
-        chunk = self._chunk
-        for i in range(0, len(rows), chunk):
-            part = rows[i:i + chunk]
-            sql = self._insert_full if len(part) == chunk else positional_insert(
-                self.engine, table, _COLUMNS, len(part))
-            assert sql is not None  # positional, as _insert_full is
-            try:
-                conn.exec_driver_sql(sql, tuple(itertools.chain.from_iterable(part)))
-            except OverflowError as e:  # sqlite3 binding an int beyond int64: that row's data error
-                raise sa.exc.DataError(sql, None, OverflowError(f"a value out of range: {e}")) from None
 
     def _release_reservations(self) -> None:
         """After a clean stop, the next run continues right after the last committed seq."""
@@ -548,61 +497,6 @@ class HistoryWriter:
             log.exception("could not release sequence reservations (the next run skips ahead)")
 
 
-def _copy_rows(conn: sa.Connection, table: str, rows: list[_Row],
-               meanwhile: Callable[[], bool] | None = None, data: bytearray | None = None) -> None:
-    """PostgreSQL through psycopg 3: ``COPY ... FROM STDIN`` in the batch's transaction.
-
-    A multi-row INSERT makes psycopg adapt every parameter in Python and PostgreSQL parse
-    a statement of 6,000 placeholders: ~6,000 rows/s measured; COPY streams the rows at many
-    times that. The batch's binary COPY data is built in one buffer (``_copy_data``: half the
-    CPU of psycopg's ``write_row`` per row) and handed to libpq at once; it sends what the socket
-    takes, and between ``meanwhile``'s steps (the next batch's encoding) more is pushed in, so
-    that the server always has data while this thread computes.
-    A row the database refuses fails the COPY as a whole, raised as SQLAlchemy's error class
-    for it (IntegrityError, DataError...), so ``_write_isolating`` halves the batch exactly as
-    for an INSERT; a number out of its column's range is a DataError before anything is sent.
-    """
-    sql = f"COPY {table} ({', '.join(_COLUMNS)}) FROM STDIN (FORMAT BINARY)"  # ~15 % over text
-    import psycopg  # loaded already: the engine's driver
-    from psycopg.copy import LibpqWriter
-
-    try:
-        if data is None:
-            data = _copy_data(rows)
-    except struct.error as e:  # what PostgreSQL would refuse too (int4/int8/int2 columns)
-        raise sa.exc.DataError(sql, None, psycopg.DataError(f"a value out of range: {e}")) from None
-    dbapi_conn = conn.connection.dbapi_connection
-    assert isinstance(dbapi_conn, psycopg.Connection)
-    try:
-        with dbapi_conn.cursor() as cur, \
-                cur.copy(sql, writer=LibpqWriter(cur, flush_threshold=1 << 62)) as copy:
-            copy.write(data)  # into libpq's buffer (this threshold: never waits), partly sent
-            pgconn = dbapi_conn.pgconn
-            while pgconn.flush() == 1 and meanwhile is not None and meanwhile():
-                pass  # the socket took more; a step done: push more (the rest at the COPY's end)
-    except conn.dialect.loaded_dbapi.Error as e:
-        raise sa.exc.DBAPIError.instance(sql, None, e, conn.dialect.loaded_dbapi.Error) from None
-
-
-def _copy_data(rows: list[_Row]) -> bytearray:
-    """The rows in PostgreSQL's binary COPY format, signature to trailer: the bytes psycopg's
-    ``write_row`` sends for them with the column types int4, int8, int8, int2, varchar, bytea."""
-    head, length = _COPY_HEAD.pack, _COPY_LEN.pack
-    names: dict[str, bytes] = {}  # a handful of affordance names: each encoded once
-    out = bytearray(_COPY_SIGNATURE)
-    for key, seq, t_ns, kind, name, data in rows:
-        field = names.get(name)
-        if field is None:
-            text = name.encode()
-            field = names[name] = length(len(text)) + text
-        out += head(6, 4, key, 8, seq, 8, t_ns, 2, kind)
-        out += field
-        out += length(len(data))
-        out += data
-    out += _COPY_TRAILER
-    return out
-
-
 class _Ahead:
     """The next batch, its payloads encoded a slice at a time (``step``) while the current batch
     is written, then its rows and COPY data built (``prepared``); ``result`` encodes what is
@@ -611,11 +505,11 @@ class _Ahead:
     raises it, for that batch)."""
 
     def __init__(self, encode: Callable[[Sequence[Record]], list[bytes]],
-                 prepare: Callable[[Sequence[Record], list[bytes]], _Prepared], batch: list[Record]) -> None:
+                 prepare: Callable[[Sequence[Record], list[bytes]], Prepared], batch: list[Record]) -> None:
         self.batch = batch
-        self.prepared: _Prepared | None = None
+        self.prepared: Prepared | None = None
         self._encode = encode
-        self._prepare: Callable[[Sequence[Record], list[bytes]], _Prepared] | None = prepare
+        self._prepare: Callable[[Sequence[Record], list[bytes]], Prepared] | None = prepare
         self._parts: list[list[bytes]] = []
         self._done = 0
         self._error: Exception | None = None
@@ -648,9 +542,3 @@ class _Ahead:
         if self._error is not None:
             raise self._error
         return [d for part in self._parts for d in part]
-
-
-def _one_line(e: BaseException) -> str:
-    """The driver's message without SQLAlchemy's statement dump and background link."""
-    text = str(getattr(e, "orig", None) or e)
-    return text.splitlines()[0] if text else type(e).__name__

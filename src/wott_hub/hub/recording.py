@@ -49,7 +49,7 @@ class HubHistory:
 
         self.writer = HistoryWriter(self.engine, batch_max=cfg.history_batch_max,
                                     interval_s=cfg.history_batch_ms / 1000, retention=cfg.retention,
-                                    on_commit=committed,
+                                    on_commit=committed, process=cfg.history_process,
                                     **({"hub_id": self.hub_id} if self.hub_id else {}))
         if cfg.directory.enabled:  # its directory writes here too: own the database before serving it
             self.writer.acquire_lease()  # a second hub on this database refuses here (Conflict)

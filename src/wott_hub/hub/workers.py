@@ -30,7 +30,8 @@ Protocol (pickled tuples on a ``multiprocessing`` pipe):
 - worker -> hub: ``("opened", id, DeviceDescription, family, capabilities)``, ``("failed", id, message)``,
   ``("recs", [(id, [(kind, name, t_ns, data, trace, skin), ...]), ...])`` (one entry per frame, in
   the order they were made; ``skin``: None or a ``SkinArrays`` as (int64 ids, float64 intensity)
-  bytes, ``_skin_to_wire``; the hub hands each frame on as ``("recs", id, records)`` with a ``SkinArrays``),
+  bytes, ``SkinArrays.to_wire``; the hub hands each frame on as ``("recs", id, records)`` with a
+  ``SkinArrays``),
   ``("health", {id: (state, reason, frames, frame_errors, restarts)})``, ``("ended", id, reason)``,
   ``("acted", request, detail, error, report)``
 
@@ -59,8 +60,6 @@ import os
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
-
-import numpy as np
 
 from wott_hub import errors
 from wott_hub.drivers.base import Health, HealthStatus
@@ -223,7 +222,7 @@ class WorkerPool:
             if kind == "recs":
                 on_message = self.on_message
                 for thing, recs in msg[1]:
-                    on_message(("recs", thing, [r if r[5] is None else (*r[:5], _skin_from_wire(r[5]))
+                    on_message(("recs", thing, [r if r[5] is None else (*r[:5], SkinArrays.from_wire(r[5]))
                                                 for r in recs]))
             elif kind == "acted":
                 self._answered(msg)
@@ -254,16 +253,6 @@ class WorkerPool:
 
 
 # --- the worker process ---------------------------------------------------------------
-
-def _skin_to_wire(skin: SkinArrays) -> tuple[bytes, bytes]:
-    """A skin's arrays as raw bytes: pickling two ndarrays costs ~4x more on each side."""
-    return (skin.ids.astype(np.int64, copy=False).tobytes(),
-            skin.intensity.astype(np.float64, copy=False).tobytes())
-
-
-def _skin_from_wire(wire: tuple[bytes, bytes]) -> SkinArrays:
-    return SkinArrays(np.frombuffer(wire[0], np.int64), np.frombuffer(wire[1], np.float64))
-
 
 class Outbox:
     """The worker's side of the pipe: records of every device batched, everything else in order after them.
@@ -326,7 +315,7 @@ class PipeSink:
 
     def publish(self, _thing: str, kind: int, name: str, t_ns: int, data: str,
                 trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> None:
-        self._recs.append((kind, name, t_ns, data, trace, None if skin is None else _skin_to_wire(skin)))
+        self._recs.append((kind, name, t_ns, data, trace, None if skin is None else skin.to_wire()))
 
     def frame_done(self) -> None:
         if self._recs:
