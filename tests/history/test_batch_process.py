@@ -145,3 +145,27 @@ def _alive(pid: int) -> bool:
             return f.read().split()[2] != "Z"  # a zombie has exited (init reaps it)
     except FileNotFoundError:
         return False
+
+
+def test_a_backlog_is_written_by_the_writers_thread_until_the_writer_keeps_up(tmp_path):
+    """``_CATCH_UP``: the thread writes faster than the hand-over to the process allows."""
+    engine = create_engine(database_url(tmp_path / "h.db"))
+    upgrade(engine)
+    w = HistoryWriter(engine, interval_s=0.01, batch_max=1_000, process=True)
+    start = w.register_thing("d")
+    for i in range(1, 30_001):  # queued before the writer starts: a backlog
+        w.submit(Record("d", start + i, KIND_EVENT, "tick", 10**18 + i, str(i)))
+    process = w._process
+    by_process = []
+    commit = process.commit
+    process.commit = lambda records, *a: (by_process.append(len(records)), commit(records, *a))
+    w.start()
+    try:
+        assert w.flush(60)
+    finally:
+        w.stop()
+    assert w.written == 30_000 and w.batches == 30
+    assert sum(by_process) == 20_000  # the last 20 batches: fewer than _CATCH_UP waiting behind each
+    with engine.connect() as conn:
+        assert [r[0] for r in conn.exec_driver_sql("SELECT seq FROM events ORDER BY id")] == \
+            list(range(start + 1, start + 30_001))

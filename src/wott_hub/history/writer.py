@@ -26,7 +26,8 @@ Contract (what keeps the writer from ever wedging):
   process took the writer lease (this writer then records nothing more).
 - With ``process=True`` (the hub's ``history_process``, on by default) each batch is encoded
   and written by a process of its own (``batch_process.py``), off the GIL of the process that
-  submits; the rest stays here. A process that exits fails the batch in hand, which is retried.
+  submits, while the writer keeps up (``_CATCH_UP``); the rest stays here. A process that exits
+  fails the batch in hand, which is retried.
 - The writer takes its hub's lease in the database (``lease.py``, keyed by
   ``hub_id``) before its first Thing is registered, refreshes it, and releases
   it at a clean stop: a second process of the same hub id on the same database
@@ -72,6 +73,12 @@ as fewer than this many of one Thing wait in the queue (``queue_max`` keeps it s
 _AHEAD_MIN = 1_000
 """Records that must wait behind a batch for the writer to take the next batch and encode it
 while PostgreSQL writes this one: below that the writer is keeping up."""
+_CATCH_UP = 20_000
+"""Records waiting behind a batch from which the writer's thread writes it itself though it has a
+batch process: catching up matters more then than the event loop's share of the GIL. The
+process writes 29,000-54,000 records/s (the hand-over costs ~8 µs a record: the tuples, pickling,
+the pipe, unpickling), the thread 67,000-82,000 (docs/history.md); a hub keeping up has ~770
+waiting per 50 ms batch at 64 devices x 120 Hz."""
 _ENCODE_SLICE = 1_000
 """Records encoded per step of ``_Ahead``: about 4 ms, well under the ~20 ms of work that a
 socket's buffer of COPY data gives PostgreSQL (and no dearer per record than a whole batch)."""
@@ -132,6 +139,7 @@ class HistoryWriter:
         self._thread: threading.Thread | None = None
         self._inserter = Inserter(engine)
         self._process = BatchProcess(engine.url) if process else None  # batch_process.py
+        self._delegate = False  # the batch in hand goes to the process (_CATCH_UP)
         self.compact = compact
         self._next_retention = 0.0
 
@@ -361,9 +369,10 @@ class HistoryWriter:
             self.on_commit(tops)
 
     def _write_pending(self) -> None:
-        """Write the queue batch by batch. On PostgreSQL, while more records wait, the next batch
-        is taken too and its payloads encoded (``codec.py``, Python: about as costly as the
-        server's work) a slice at a time, then its COPY data built, while the server works
+        """Write the queue batch by batch, each by the batch process if there is one and fewer than
+        ``_CATCH_UP`` records wait behind it, else here. Here, on PostgreSQL, while more records
+        wait, the next batch is taken too and its payloads encoded (``codec.py``, Python: about as
+        costly as the server's work) a slice at a time, then its COPY data built, while the server works
         through this batch's COPY data: the two costs overlap instead of adding up. In this
         thread, between its socket writes, not in another one: a second thread would hold the
         GIL while the socket waits for more data, and each hand-over takes up to the
@@ -374,8 +383,9 @@ class HistoryWriter:
         while (batch or q) and not self.lease.lost:
             if not batch:
                 batch, encoded = self._take(), None
+            self._delegate = self._process is not None and encoded is None and len(q) < _CATCH_UP
             ahead = _Ahead(self._payloads, self._prepare, self._take()) \
-                if self._inserter.copy and self._process is None and len(q) >= _AHEAD_MIN else None
+                if self._inserter.copy and not self._delegate and len(q) >= _AHEAD_MIN else None
             self._write_isolating(batch, encoded, ahead)
             batch, encoded = ([], None) if ahead is None else (ahead.batch, ahead)
         if batch:  # taken ahead when the lease was lost: back in the queue, given up with it
@@ -449,7 +459,7 @@ class HistoryWriter:
         and COPY data."""
         t0 = time.perf_counter()
         keys = self.keys
-        if self._process is not None:  # the records as they are: the process encodes them
+        if self._delegate:  # the records as they are: the process encodes them
             try:
                 wire = [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, r.data,
                          None if r.skin is None else r.skin.to_wire()) for r in batch]
@@ -470,7 +480,8 @@ class HistoryWriter:
         reserve = {thing: top + RESERVE for thing, top in tops.items()
                    if top > self._reserved[thing] - RESERVE // 2 - 2 * self.batch_max}
         by_key = [(keys[thing], seq) for thing, seq in reserve.items()]
-        if self._process is not None:
+        if self._delegate:
+            assert self._process is not None
             self._process.commit(wire, by_key, self.compact)
         else:
             self._inserter.commit(rows, by_key, meanwhile, copy)
