@@ -4,10 +4,11 @@ Why: the writer thread encodes each batch (``codec.py``) and has the driver bind
 Python, holding the GIL it shares with the event loop; the loop waits for it each time (up to
 the interpreter's 5 ms switch interval). Measured at 32 devices x 120 Hz on 2 cores: 2,730 of
 3,840 frames/s processed and SSE p50 5.3 ms with the thread, 3,530-3,620 and 1.4-1.7 ms with no
-history at all (docs/hub.md, "History in a process"). Here the writer's thread only hands each
-batch's records over, as they are, and waits (GIL released) while this process encodes and
+history at all (docs/history.md, "The writer's process"). Here the writer's thread only hands
+each batch's records over, as they are, and waits (GIL released) while this process encodes and
 commits them; the writer keeps everything else (queue, lease, reservations, isolation of
-refused rows, health, retention).
+refused rows, health, retention). A backlog (``writer._CATCH_UP``) the thread writes itself:
+handing over costs ~8 µs a record, more than catching up can spare.
 
 Protocol: two pipes of pickled messages (``multiprocessing.connection`` framing), strictly
 request then answer. Writer -> process: ``("open", url)`` once, then ``("commit", records,
@@ -53,7 +54,7 @@ class BatchRefused(BatchProcessError):
 
 
 class BatchProcess:
-    """The writer thread's handle on the process: started on the first batch, again after it exits."""
+    """The writer thread's handle on the process: started when the thread starts, again after it exits."""
 
     def __init__(self, url: URL) -> None:
         self._url = url.render_as_string(hide_password=False)  # sent over the pipe, never in argv

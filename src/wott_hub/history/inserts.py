@@ -18,8 +18,7 @@ from sqlalchemy.engine import Engine
 
 from .models import EventRow, ThingRow
 
-__all__ = ["COLUMNS", "DATA_ERRORS", "Inserter", "Prepared", "Row", "copy_data", "one_line",
-           "positional_insert"]
+__all__ = ["DATA_ERRORS", "Inserter", "Prepared", "Row", "copy_data", "one_line", "positional_insert"]
 
 COLUMNS = ("thing_key", "seq", "t_ns", "kind", "name", "data")
 Row = tuple[int, int, int, int, str, bytes]  # the values of COLUMNS
