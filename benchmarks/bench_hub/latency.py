@@ -20,7 +20,7 @@ from report import pct  # benchmarks/report.py (this package's report is `from .
 
 from . import report
 from .clients import Client
-from .common import now_ns, payload
+from .common import cpu_s, descendants, now_ns, payload
 
 __all__ = ["DEFAULT_DEVICES", "DEFAULT_WORKERS", "QUICK_DEVICES", "REPEATED", "latency_ours", "latency_plain",
            "run"]
@@ -78,14 +78,12 @@ def history_cpu_s() -> float:
     import os
 
     total = 0.0
-    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            try:
-                if b"wott_hub.history.batch_process" in Path(f"/proc/{child}/cmdline").read_bytes():
-                    fields = Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1].split()
-                    total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-            except FileNotFoundError:  # a process that has just exited
-                pass
+    for pid in descendants(os.getpid()):
+        try:
+            if b"wott_hub.history.batch_process" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                total += cpu_s(pid)
+        except FileNotFoundError:  # a process that has just exited
+            pass
     return total
 
 

@@ -20,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from .common import cpu_s, descendants
+
 __all__ = ["LAUNCHERS", "REST_S", "TRIALS", "at_rest", "launch_command", "run", "startup_times", "summary"]
 
 TRIALS = 3
@@ -104,10 +106,10 @@ def at_rest(seconds: float = REST_S) -> dict[str, float]:
             assert proc.stdout is not None
             proc.stdout.readline()  # the --json line: ready
             time.sleep(5.0)
-            pids = _tree(proc.pid)
-            cpu0, t0 = sum(map(_cpu_s, pids)), time.monotonic()
+            pids = [proc.pid, *descendants(proc.pid)]
+            cpu0, t0 = sum(map(cpu_s, pids)), time.monotonic()
             time.sleep(seconds)
-            cpu1, t1 = sum(map(_cpu_s, pids)), time.monotonic()
+            cpu1, t1 = sum(map(cpu_s, pids)), time.monotonic()
             kib = [_memory_kib(pid) for pid in pids]
         finally:
             proc.terminate()
@@ -116,24 +118,11 @@ def at_rest(seconds: float = REST_S) -> dict[str, float]:
             "peak_mib": sum(k["VmHWM"] for k in kib) / 1024, "seconds": seconds, "processes": len(pids)}
 
 
-def _tree(pid: int) -> list[int]:
-    """``pid`` and its descendants."""
-    out = [pid]
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            out += _tree(int(child))
-    return out
-
-
 def _memory_kib(pid: int) -> dict[str, int]:
     status = Path(f"/proc/{pid}/status").read_text()
     return {k: int(v.split()[0]) for k, v in (line.split(":", 1) for line in status.splitlines())
             if k in ("VmRSS", "VmHWM")}
 
-
-def _cpu_s(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
 
 
 async def run() -> dict:

@@ -139,7 +139,6 @@ class HistoryWriter:
         self._thread: threading.Thread | None = None
         self._inserter = Inserter(engine)
         self._process = BatchProcess(engine.url) if process else None  # batch_process.py
-        self._delegate = False  # the batch in hand goes to the process (_CATCH_UP)
         self.compact = compact
         self._next_retention = 0.0
 
@@ -383,10 +382,10 @@ class HistoryWriter:
         while (batch or q) and not self.lease.lost:
             if not batch:
                 batch, encoded = self._take(), None
-            self._delegate = self._process is not None and encoded is None and len(q) < _CATCH_UP
+            process = self._process if encoded is None and len(q) < _CATCH_UP else None
             ahead = _Ahead(self._payloads, self._prepare, self._take()) \
-                if self._inserter.copy and not self._delegate and len(q) >= _AHEAD_MIN else None
-            self._write_isolating(batch, encoded, ahead)
+                if self._inserter.copy and process is None and len(q) >= _AHEAD_MIN else None
+            self._write_isolating(batch, encoded, ahead, process)
             batch, encoded = ([], None) if ahead is None else (ahead.batch, ahead)
         if batch:  # taken ahead when the lease was lost: back in the queue, given up with it
             q.extendleft(reversed(batch))
@@ -396,12 +395,12 @@ class HistoryWriter:
         return [q.popleft() for _ in range(min(len(q), self.batch_max))]
 
     def _write_isolating(self, batch: list[Record], encoded: _Ahead | None = None,
-                         ahead: _Ahead | None = None) -> None:
-        """Write ``batch`` (``encoded``: its payloads, encoded ahead); rows the database refuses
-        for their data are isolated by halving (log2(n) extra transactions per refused row) and
-        given up on, the others written. Any other error puts every row not yet written back at
-        the head of the queue, followed by ``ahead``'s (the next batch, taken and being encoded
-        while this one is written)."""
+                         ahead: _Ahead | None = None, process: BatchProcess | None = None) -> None:
+        """Write ``batch`` (``encoded``: its payloads, encoded ahead; ``process``: by it); rows the
+        database refuses for their data are isolated by halving (log2(n) extra transactions per
+        refused row) and given up on, the others written. Any other error puts every row not yet
+        written back at the head of the queue, followed by ``ahead``'s (the next batch, taken and
+        being encoded while this one is written)."""
         todo: list[tuple[list[Record], list[bytes] | None]] = []  # a stack, left halves on top:
         part: list[Record] = batch  # rows are written in seq order
         prepared = None if encoded is None else encoded.prepared  # for the whole batch only
@@ -411,7 +410,7 @@ class HistoryWriter:
                 part, payloads = todo.pop()
                 try:
                     self._write(part, payloads, None if ahead is None else ahead.step,
-                                prepared if part is batch else None)
+                                prepared if part is batch else None, process)
                 except (*DATA_ERRORS, _Refused, BatchRefused) as e:
                     if len(part) == 1:
                         self._refuse(part[0], e)
@@ -453,13 +452,14 @@ class HistoryWriter:
         return rows, copy_data(rows)
 
     def _write(self, batch: list[Record], payloads: list[bytes] | None = None,
-               meanwhile: Callable[[], bool] | None = None, prepared: Prepared | None = None) -> None:
-        """One transaction, here or in the batch process; ``meanwhile``: work to do in steps while
+               meanwhile: Callable[[], bool] | None = None, prepared: Prepared | None = None,
+               process: BatchProcess | None = None) -> None:
+        """One transaction, here or in ``process``; ``meanwhile``: work to do in steps while
         PostgreSQL takes the COPY data (it returns False when done); ``prepared``: the batch's rows
         and COPY data."""
         t0 = time.perf_counter()
         keys = self.keys
-        if self._delegate:  # the records as they are: the process encodes them
+        if process is not None:  # the records as they are: the process encodes them
             try:
                 wire = [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, r.data,
                          None if r.skin is None else r.skin.to_wire()) for r in batch]
@@ -480,9 +480,8 @@ class HistoryWriter:
         reserve = {thing: top + RESERVE for thing, top in tops.items()
                    if top > self._reserved[thing] - RESERVE // 2 - 2 * self.batch_max}
         by_key = [(keys[thing], seq) for thing, seq in reserve.items()]
-        if self._delegate:
-            assert self._process is not None
-            self._process.commit(wire, by_key, self.compact)
+        if process is not None:
+            process.commit(wire, by_key, self.compact)
         else:
             self._inserter.commit(rows, by_key, meanwhile, copy)
         self._reserved.update(reserve)
