@@ -232,3 +232,66 @@ def test_frame_records_stamps_the_skin_packet_when_tracing():
     traces = {rec[2]: rec[5] for rec in out}
     assert set(traces[SKIN_DEFORMED]) == {"in", "proc", "enc"} and traces[SKIN_DEFORMED]["in"] == 123
     assert all(trace is None for name, trace in traces.items() if name != SKIN_DEFORMED)
+
+
+def _consume_with(sub, direct):
+    """Run ``sub``'s consumer with the writer ``direct``; its batches' seqs land in the list returned."""
+    batches: list[list[int]] = []
+
+    async def consume():
+        async for batch in sub.batches(direct):
+            batches.append([r.seq for r in batch])
+
+    return asyncio.create_task(consume()), batches
+
+
+def test_an_idle_consumer_is_written_to_by_push_itself_up_to_the_burst_then_in_one_batch():
+    from wott_hub.events.subscriber import DIRECT_BURST
+
+    async def main():
+        plane = EventPlane()
+        plane.add_stream("a", record=False)
+        sub = plane.subscribe("a", (KIND_EVENT, "x"))
+        written: list[int] = []
+        task, batches = _consume_with(sub, lambda rec: written.append(rec.seq) is None)
+        await asyncio.sleep(0)  # the consumer waits, nothing pending
+        seqs = [plane.publish("a", KIND_EVENT, "x", 0, str(i)).seq for i in range(20)]
+        burst = int(DIRECT_BURST)
+        assert written == seqs[:burst]  # inside publish: no loop turn in between
+        await asyncio.sleep(0.02)  # the rest went to the consumer's task, in one write; credit is back
+        assert batches == [seqs[burst:]]
+        later = plane.publish("a", KIND_EVENT, "x", 0, "later").seq
+        assert written[-1] == later and sub.last_seq == later
+        task.cancel()
+
+    asyncio.run(main())
+
+
+def test_a_record_the_writer_refuses_or_fails_on_is_queued_and_none_overtakes_it():
+    async def main():
+        plane = EventPlane()
+        plane.add_stream("a", record=False)
+        sub = plane.subscribe("a", (KIND_EVENT, "x"))
+        written: list[int] = []
+
+        def direct(rec):
+            if rec.data == "busy":  # the socket is backed up
+                return False
+            if rec.data == "bug":
+                raise RuntimeError("a consumer's bug")
+            written.append(rec.seq)
+            return True
+
+        task, batches = _consume_with(sub, direct)
+        await asyncio.sleep(0)
+        first = plane.publish("a", KIND_EVENT, "x", 0, "ok").seq
+        busy = [plane.publish("a", KIND_EVENT, "x", 0, d).seq for d in ("busy", "ok", "ok")]
+        await asyncio.sleep(0)
+        bug = [plane.publish("a", KIND_EVENT, "x", 0, d).seq for d in ("bug", "ok")]  # publisher unharmed
+        await asyncio.sleep(0)
+        assert written == [first] and batches == [busy, bug]
+        last = plane.publish("a", KIND_EVENT, "x", 0, "ok").seq  # idle again: written at once
+        assert written == [first, last]
+        task.cancel()
+
+    asyncio.run(main())

@@ -1,25 +1,41 @@
 """A consumer of the event plane: an SSE connection, a WebSocket subscription...
 
-Publishing never waits for a consumer: ``push`` appends to the subscriber's
-queue and wakes its task, which sends everything pending in one write (under
-load, many records per write: throughput; when idle, one: latency). A consumer
-that falls ``max_pending`` records behind is cut off instead of slowing the
-hub down or growing memory without bound; an SSE client then reconnects with
-``Last-Event-ID`` and is served the rest from history, so it loses nothing.
+Publishing never waits for a consumer. While a consumer waits in ``batches``
+with nothing pending, ``push`` writes a record itself through the consumer's
+``direct`` writer, at once: waking the consumer's task instead would send it
+only after everything else ready on the loop (at 32 devices, milliseconds).
+Otherwise, or when the writer cannot take it now (its socket backed up),
+``push`` queues the record and wakes the task, which sends everything pending
+in one write: under load many records per write (``DIRECT_RATE`` bounds the
+writes a busy stream makes one by one), and no record overtakes a queued one.
+A consumer that falls ``max_pending`` records behind is cut off instead of
+slowing the hub down or growing memory without bound; an SSE client then
+reconnects with ``Last-Event-ID`` and is served the rest from history, so it
+loses nothing.
 """
 
 from __future__ import annotations
 
 import asyncio
+import time
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 
 from .record import Record
 
-__all__ = ["Interest", "Subscriber"]
+__all__ = ["DIRECT_BURST", "DIRECT_RATE", "Direct", "Interest", "Subscriber"]
 
 Interest = tuple[int, str | None]
 """(kind, name): name None means every affordance of that kind."""
+
+Direct = Callable[[Record], bool]
+"""A consumer's writer of one record, called by ``push``: True if written, False to queue it."""
+
+DIRECT_RATE = 1000.0
+DIRECT_BURST = 8.0
+"""How many records a subscriber writes itself: ``DIRECT_RATE`` a second on average, up to
+``DIRECT_BURST`` back to back (a device catching up yields a few frames at once); beyond that a
+record is queued and goes with the rest of the loop turn's, in one write."""
 
 
 class Subscriber:
@@ -34,6 +50,9 @@ class Subscriber:
         self.last_seq = -1  # the last seq handed to the consumer (de-duplicates backfill vs live)
         self.gap: tuple[int, int] | None = None  # (after, first available) when history cannot fill
         self._wake: asyncio.Future[None] | None = None
+        self._direct: Direct | None = None  # set while the consumer waits with nothing pending
+        self._direct_at = 0.0
+        self._credit = DIRECT_BURST
         self._backfill: AsyncIterator[list[Record]] | None = None
         self._on_close = on_close
 
@@ -44,11 +63,26 @@ class Subscriber:
     def push(self, rec: Record) -> None:
         if self.closed:
             return
+        direct = self._direct
+        if direct is not None:
+            now = time.monotonic()  # a token bucket: DIRECT_RATE a second, DIRECT_BURST at once
+            credit = min(self._credit + (now - self._direct_at) * DIRECT_RATE, DIRECT_BURST)
+            self._direct_at = now
+            self._credit = credit - 1.0 if credit >= 1.0 else credit
+            if credit >= 1.0:
+                try:
+                    written = direct(rec)
+                except Exception:  # a consumer's bug must not reach the publisher: queue it
+                    written = False
+                if written:
+                    self.last_seq = rec.seq
+                    return
         if len(self.pending) >= self.max_pending:
             self.overflowed = True
             self.close()
             return
         self.pending.append(rec)
+        self._direct = None  # the consumer sends what is queued first: no record may overtake it
         wake = self._wake
         if wake is not None and not wake.done():
             wake.set_result(None)
@@ -62,8 +96,9 @@ class Subscriber:
         if wake is not None and not wake.done():
             wake.set_result(None)
 
-    async def batches(self) -> AsyncIterator[list[Record]]:
-        """Backfilled records (resume) first, then live ones, in seq order, each once."""
+    async def batches(self, direct: Direct | None = None) -> AsyncIterator[list[Record]]:
+        """Backfilled records (resume) first, then live ones, in seq order, each once; while the
+        consumer waits, ``push`` may write a record itself with ``direct`` (module docstring)."""
         if self._backfill is not None:
             async for batch in self._backfill:
                 out = [r for r in batch if r.seq > self.last_seq]
@@ -77,8 +112,11 @@ class Subscriber:
         while not self.closed:
             if not self.pending:
                 self._wake = loop.create_future()
-                await self._wake
-                self._wake = None
+                self._direct = direct
+                try:
+                    await self._wake
+                finally:
+                    self._direct = self._wake = None
                 continue
             batch = list(self.pending)
             self.pending.clear()

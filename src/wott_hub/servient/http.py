@@ -182,7 +182,17 @@ class _StreamHandler(_Base):
             self._last_write = time.monotonic()
             conn = self.request.connection
             assert conn is not None
-            async for batch in sub.batches():
+
+            def direct(rec: Record) -> bool:  # push writes a record itself while the socket keeps up
+                if stream.writing() or stream.closed() or sub.gap is not None:  # the gap is said first
+                    return False
+                conn.write(rec.sse(named))
+                if rec.trace is not None:
+                    rec.trace["sse"] = time.perf_counter_ns()
+                self._last_write = time.monotonic()
+                return True
+
+            async for batch in sub.batches(direct):
                 if sub.gap is not None:
                     conn.write(f": gap: records after {sub.gap[0]} before {sub.gap[1]} are not "
                                f"recorded\n\n".encode())

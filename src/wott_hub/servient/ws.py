@@ -53,7 +53,7 @@ from wotpy.protocols.ws.enums import WebsocketErrors, WebsocketMethods
 from wotpy.protocols.ws.handler import WebsocketHandler
 from wotpy.protocols.ws.messages import WebsocketMessageRequest
 
-from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
 from wott_hub.events.subscriber import Subscriber
 from wott_hub.security.policy import allows
 from wott_hub.security.scopes import Scope
@@ -270,8 +270,21 @@ class FastWebsocketHandler(WebsocketHandler):
             head = ('{"subscription":"' + sid + '","name":"propertychange","data":{"name":'
                     + _dumps(name) + ',"value":')
             tail = "}}"
+
+        def direct(rec: Record) -> bool:  # push writes a record itself while the socket keeps up
+            conn = self.ws_connection
+            if conn is None or getattr(conn, "_compressor", None) is not None:
+                return False
+            stream = conn.stream
+            if stream.writing() or stream.closed():
+                return False
+            stream.write(_text_frame((head + rec.data + tail).encode()))
+            if rec.trace is not None:
+                rec.trace["ws"] = time.perf_counter_ns()
+            return True
+
         try:
-            async for batch in sub.batches():
+            async for batch in sub.batches(direct):
                 conn = self.ws_connection
                 if conn is None:
                     break

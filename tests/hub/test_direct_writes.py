@@ -1,0 +1,108 @@
+"""Records written by the publisher itself (``events/subscriber.py``) over real sockets.
+
+An SSE client and a WebSocket client stop reading while the hub publishes
+megabytes: their sockets back up, the hub keeps running, what follows is
+queued; once they read again each gets every record once, in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+import socket
+import time
+
+import pytest
+from tornado.websocket import websocket_connect
+
+from wott_hub.config import HubConfig
+from wott_hub.events.record import KIND_EVENT
+
+EVENT = "actionDetection"  # declared by the device, published by it only now and then
+PADDING = "x" * 1000
+ROUNDS, PER_ROUND = 200, 100  # at most 20 MB: well past what loopback buffers hold
+
+
+@pytest.fixture(scope="module")
+def hub(hub_thread, press_scene):
+    ht = hub_thread(HubConfig(http_port=0, ws_port=0, history=False, devices=(press_scene("pad"),))).start()
+    yield ht
+    ht.stop()
+
+
+def _flood(ht) -> tuple[list[int], bool]:
+    """Publish on the hub's loop, in rounds, until a subscriber of EVENT has records queued behind
+    its backed-up socket (or ROUNDS are spent): the seqs published, and whether one was queued."""
+    plane = ht.hub.plane
+
+    async def run() -> tuple[list[int], bool]:
+        seqs: list[int] = []
+        for _ in range(ROUNDS):
+            seqs += [plane.publish("pad", KIND_EVENT, EVENT, time.time_ns(),
+                                   json.dumps({"i": len(seqs) + k, "padding": PADDING})).seq
+                     for k in range(PER_ROUND)]
+            await asyncio.sleep(0.002)  # the consumers write what was queued, until the socket is full
+            if any(s.pending for s in plane.stream("pad").subs.get((KIND_EVENT, EVENT), ())):
+                return seqs, True
+        return seqs, False
+
+    return ht.call(run, timeout=60)
+
+
+def _subscribers(ht) -> int:
+    return ht.call(lambda: len(ht.hub.plane.stream("pad").subs.get((KIND_EVENT, EVENT), ())))
+
+
+def test_an_sse_client_that_stops_reading_backs_up_then_gets_every_record_once_in_order(hub):
+    sock = socket.create_connection(("127.0.0.1", hub.hub.server.http_port), timeout=10)
+    try:
+        sock.sendall(f"GET /wot/pad/events/{EVENT} HTTP/1.1\r\nHost: x\r\nAccept: text/event-stream\r\n\r\n"
+                     .encode())
+        got = sock.recv(65536)
+        assert got.startswith(b"HTTP/1.1 200"), got[:200]
+        deadline = time.monotonic() + 10
+        while _subscribers(hub) < 1:
+            assert time.monotonic() < deadline, "the stream was not subscribed"
+            time.sleep(0.01)
+        seqs, queued = _flood(hub)
+        assert queued, f"{len(seqs)} records of 1 kB never backed the socket up"
+        buf = bytearray(got)
+        ids: list[int] = []
+        while not ids or ids[-1] < seqs[-1]:
+            chunk = sock.recv(1 << 20)
+            assert chunk, "the hub closed the stream"
+            buf += chunk
+            end = buf.rfind(b"\n\n")  # whole SSE messages only (a chunk ends with one)
+            if end > 0:
+                ids += [int(m) for m in re.findall(rb"^id: (\d+)$", bytes(buf[:end]), re.M)]
+                del buf[:end + 2]
+        assert ids == sorted(set(ids)), "a record came twice or out of order"
+        assert set(seqs) <= set(ids), f"{len(set(seqs) - set(ids))} records lost"
+    finally:
+        sock.close()
+
+
+def test_a_websocket_client_that_stops_reading_backs_up_then_gets_every_record_once_in_order(hub):
+    async def main() -> None:
+        ws = await websocket_connect(f"ws://127.0.0.1:{hub.hub.server.ws_port}/pad", connect_timeout=5)
+        try:
+            await ws.write_message(json.dumps({"jsonrpc": "2.0", "method": "on_event",
+                                               "params": {"name": EVENT}, "id": 1}))
+            sid = json.loads(await asyncio.wait_for(ws.read_message(), 5))["result"]
+            while _subscribers(hub) < 1:
+                await asyncio.sleep(0.01)
+            # tornado's client stops reading the socket while a message waits to be read
+            seqs, queued = await asyncio.to_thread(_flood, hub)
+            assert queued, f"{len(seqs)} records of 1 kB never backed the socket up"
+            order: list[int] = []
+            while len(order) < len(seqs):
+                msg = json.loads(await asyncio.wait_for(ws.read_message(), 10))
+                assert msg.get("subscription") == sid, msg
+                if isinstance(msg["data"], dict):  # not one of the device's own actions
+                    order.append(msg["data"]["i"])
+            assert order == list(range(len(seqs))), "a record lost, repeated or out of order"
+        finally:
+            ws.close()
+
+    asyncio.run(main())
