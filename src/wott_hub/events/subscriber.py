@@ -17,10 +17,10 @@ loses nothing.
 from __future__ import annotations
 
 import asyncio
-import time
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 
+from .bucket import Bucket
 from .record import Record
 
 __all__ = ["DIRECT_BURST", "DIRECT_RATE", "Direct", "Interest", "Subscriber"]
@@ -51,8 +51,7 @@ class Subscriber:
         self.gap: tuple[int, int] | None = None  # (after, first available) when history cannot fill
         self._wake: asyncio.Future[None] | None = None
         self._direct: Direct | None = None  # set while the consumer waits with nothing pending
-        self._direct_at = 0.0
-        self._credit = DIRECT_BURST
+        self._bucket = Bucket(DIRECT_RATE, DIRECT_BURST)
         self._backfill: AsyncIterator[list[Record]] | None = None
         self._on_close = on_close
 
@@ -64,19 +63,14 @@ class Subscriber:
         if self.closed:
             return
         direct = self._direct
-        if direct is not None:
-            now = time.monotonic()  # a token bucket: DIRECT_RATE a second, DIRECT_BURST at once
-            credit = min(self._credit + (now - self._direct_at) * DIRECT_RATE, DIRECT_BURST)
-            self._direct_at = now
-            self._credit = credit - 1.0 if credit >= 1.0 else credit
-            if credit >= 1.0:
-                try:
-                    written = direct(rec)
-                except Exception:  # a consumer's bug must not reach the publisher: queue it
-                    written = False
-                if written:
-                    self.last_seq = rec.seq
-                    return
+        if direct is not None and self._bucket.take():
+            try:
+                written = direct(rec)
+            except Exception:  # a consumer's bug must not reach the publisher: queue it
+                written = False
+            if written:
+                self.last_seq = rec.seq
+                return
         if len(self.pending) >= self.max_pending:
             self.overflowed = True
             self.close()
