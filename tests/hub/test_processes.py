@@ -82,12 +82,19 @@ def _rows(db):
         engine.dispose()
 
 
+def _written(info) -> int:
+    """Records the hub reports as committed to its history."""
+    return int(httpx.get(f"{info['hub']}/properties/eventCounters").json()["history"]["written"])
+
+
 def test_sigkill_mid_stream_then_restart_loses_nothing_committed(config_file, tmp_path, read_sse):
     proc, info = _start(["run", "--config", str(config_file), "--json"], tmp_path)
     try:
         events_url = f"{info['devices']['pad']}/events"
         seen = read_sse(events_url, 150)
-        committed = httpx.get(f"{info['hub']}/properties/eventCounters").json()["history"]["written"]
+        deadline = time.monotonic() + 15  # the stream can run ahead of the first commit (a batch,
+        while (committed := _written(info)) == 0 and time.monotonic() < deadline:  # its process)
+            time.sleep(0.05)
         assert committed > 0
     finally:
         proc.send_signal(signal.SIGKILL)
