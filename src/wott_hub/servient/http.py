@@ -186,9 +186,10 @@ class _StreamHandler(_Base):
             def direct(rec: Record) -> bool:  # push writes a record itself while the socket keeps up
                 if stream.writing() or stream.closed() or sub.gap is not None:  # the gap is said first
                     return False
-                conn.write(rec.sse(named))
-                if rec.trace is not None:
-                    rec.trace["sse"] = time.perf_counter_ns()
+                if rec.trace is None:
+                    conn.write(rec.sse(named))
+                else:
+                    self._write_traced(conn, [rec], named)
                 self._last_write = time.monotonic()
                 return True
 

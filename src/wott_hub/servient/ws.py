@@ -271,6 +271,9 @@ class FastWebsocketHandler(WebsocketHandler):
                     + _dumps(name) + ',"value":')
             tail = "}}"
 
+        def frame(rec: Record) -> bytes:
+            return _text_frame((head + rec.data + tail).encode())
+
         def direct(rec: Record) -> bool:  # push writes a record itself while the socket keeps up
             conn = self.ws_connection
             if conn is None or getattr(conn, "_compressor", None) is not None:
@@ -278,7 +281,7 @@ class FastWebsocketHandler(WebsocketHandler):
             stream = conn.stream
             if stream.writing() or stream.closed():
                 return False
-            stream.write(_text_frame((head + rec.data + tail).encode()))
+            stream.write(frame(rec))
             if rec.trace is not None:
                 rec.trace["ws"] = time.perf_counter_ns()
             return True
@@ -294,7 +297,7 @@ class FastWebsocketHandler(WebsocketHandler):
                         if r.trace is not None:  # the whole batch is traced or none of it
                             r.trace["ws"] = t
                 if getattr(conn, "_compressor", None) is None:
-                    frames = b"".join([_text_frame((head + r.data + tail).encode()) for r in batch])
+                    frames = b"".join([frame(r) for r in batch])
                     fut = conn.stream.write(frames)
                     if conn.stream.writing():  # back-pressure: wait only while the socket is backed up
                         await fut  # (not per batch: a future wake-up per record, as for SSE)
