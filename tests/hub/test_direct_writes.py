@@ -2,7 +2,9 @@
 
 An SSE client and a WebSocket client stop reading while the hub publishes
 megabytes: their sockets back up, the hub keeps running, what follows is
-queued; once they read again each gets every record once, in order.
+queued; once they read again each gets every record once, in order. The SSE
+bytes the hub sends to the socket itself (``servient/sending.py``) are framed as
+tornado frames the response: chunks for HTTP/1.1, the bare stream for HTTP/1.0.
 """
 
 from __future__ import annotations
@@ -106,3 +108,59 @@ def test_a_websocket_client_that_stops_reading_backs_up_then_gets_every_record_o
             ws.close()
 
     asyncio.run(main())
+
+
+def _read_until(sock: socket.socket, buf: bytearray, done) -> bytes:
+    while not done(bytes(buf)):
+        got = sock.recv(65536)
+        assert got, f"the hub closed the stream after {bytes(buf)[-200:]!r}"
+        buf += got
+    return bytes(buf)
+
+
+def _dechunk(body: bytes) -> tuple[bytes, bytes]:
+    """Whole chunks of ``body`` joined, and what follows them (a chunk not yet complete)."""
+    out = bytearray()
+    while (eol := body.find(b"\r\n")) > 0:
+        size = int(body[:eol], 16)  # a framing error fails here
+        if len(body) < eol + 2 + size + 2:
+            break
+        assert body[eol + 2 + size:eol + 4 + size] == b"\r\n", body[:eol + 6 + size]
+        out += body[eol + 2:eol + 2 + size]
+        body = body[eol + 4 + size:]
+    return bytes(out), body
+
+
+@pytest.mark.parametrize("version", ["HTTP/1.1", "HTTP/1.0"])
+def test_sse_records_reach_the_socket_framed_as_the_http_version_says(hub, version):
+    sock = socket.create_connection(("127.0.0.1", hub.hub.server.http_port), timeout=10)
+    try:
+        sock.sendall(f"GET /wot/pad/events/{EVENT} {version}\r\nHost: x\r\nAccept: text/event-stream\r\n\r\n"
+                     .encode())
+        buf = bytearray()
+        raw = _read_until(sock, buf, lambda b: b"\r\n\r\n" in b)
+        head, _, _ = raw.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 200"), head  # (tornado's status line, whatever the request's)
+        assert (b"Transfer-Encoding: chunked" in head) == (version == "HTTP/1.1"), head
+        del buf[:len(head) + 4]
+        deadline = time.monotonic() + 10
+        while _subscribers(hub) < 1:
+            assert time.monotonic() < deadline, "the stream was not subscribed"
+            time.sleep(0.01)
+
+        async def publish() -> list[tuple[int, str]]:
+            out = []
+            for i in range(5):  # the first ones written inside publish, the others queued
+                data = json.dumps({"i": i})
+                out.append((hub.hub.plane.publish("pad", KIND_EVENT, EVENT, time.time_ns(), data).seq, data))
+            return out
+
+        sent = hub.call(publish)
+        want = b": stream open\n\n" + b"".join(f"id: {seq}\ndata: {data}\n\n".encode() for seq, data in sent)
+        if version == "HTTP/1.1":
+            body = _read_until(sock, buf, lambda b: len(_dechunk(b)[0]) >= len(want))
+            assert _dechunk(body) == (want, b"")
+        else:
+            assert _read_until(sock, buf, lambda b: len(b) >= len(want)) == want
+    finally:
+        sock.close()

@@ -1,7 +1,8 @@
 """Run inside the test's network namespace: make the requests given as JSON, print what came back.
 
 argv[1]: a JSON list of {"id", "method", "url", "token"?, "query_token"?, "body"?, "cafile"?,
-"ws"?: true (a WebSocket handshake), "sse"?: true (read the first bytes of a stream)}.
+"ws"?: true (a WebSocket handshake), "sse"?: true (read the first bytes of a stream), "until"?: text
+(with "sse": read the stream until it has come)}.
 Prints one JSON object {id: {"status", "www", "body", "error"}}. Standard library and tornado only:
 it runs with the hub's interpreter but talks to the hub only over the veth pair.
 """
@@ -23,7 +24,7 @@ def _ctx(cafile: str | None) -> ssl.SSLContext | None:
 def http_request(r: dict) -> dict:
     u = urlsplit(r["url"])
     path = u.path + (f"?{u.query}" if u.query else "")
-    timeout = 3 if r.get("sse") else 10
+    timeout = 3 if r.get("sse") and not r.get("until") else 10
     if u.scheme == "https":
         conn = http.client.HTTPSConnection(u.hostname, u.port, timeout=timeout, context=_ctx(r.get("cafile")))
     else:
@@ -40,7 +41,12 @@ def http_request(r: dict) -> dict:
     try:
         conn.request(r["method"], path, body=body, headers=headers)
         resp = conn.getresponse()
-        data = resp.read1(64) if r.get("sse") else resp.read()
+        if r.get("until"):  # a stream read until this text has come (or the timeout)
+            data = b""
+            while r["until"].encode() not in data and (more := resp.read1(4096)):
+                data += more
+        else:
+            data = resp.read1(64) if r.get("sse") else resp.read()
         return {"status": resp.status, "www": resp.getheader("WWW-Authenticate"),
                 "cors": resp.getheader("Access-Control-Allow-Origin"),
                 "body": data.decode("utf-8", "replace")}

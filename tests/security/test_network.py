@@ -299,6 +299,8 @@ def test_tls_serves_https_and_wss_and_refuses_a_client_trusting_another_ca(netns
              "cafile": str(cert)},
             {"id": "wss", "method": "GET", "ws": True, "url": f"{ws}/pad?access_token={made['read']}",
              "cafile": str(cert)},
+            {"id": "sse", "method": "GET", "sse": True, "until": "\ndata: {", "url": f"{http}/wot/pad/events",
+             "token": made["read"], "cafile": str(cert)},  # records through tornado's TLS stream
             {"id": "wrong ca", "method": "GET", "url": f"{http}/wot/pad", "token": made["read"],
              "cafile": str(other)},
             {"id": "no token", "method": "GET", "url": f"{http}/wot/pad", "cafile": str(cert)}])
@@ -308,6 +310,7 @@ def test_tls_serves_https_and_wss_and_refuses_a_client_trusting_another_ca(netns
         assert any(h.startswith("https://") for h in hrefs) and any(h.startswith("wss://") for h in hrefs)
         assert not any(h.startswith(("http://", "ws://")) for h in hrefs)
         assert got["wss"]["status"] == 101
+        assert got["sse"]["status"] == 200 and "\ndata: {" in got["sse"]["body"], got["sse"]
         assert "CERTIFICATE_VERIFY_FAILED" in got["wrong ca"]["error"]
         assert got["no token"]["status"] == 401
     finally:

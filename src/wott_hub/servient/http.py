@@ -10,11 +10,12 @@ from __future__ import annotations
 import json
 import time
 from asyncio import Future
+from collections.abc import Callable
 from typing import Any
 
 import tornado.web
 from tornado.http1connection import HTTP1Connection
-from tornado.httputil import HTTPConnection, HTTPServerRequest
+from tornado.httputil import HTTPServerRequest
 from tornado.iostream import IOStream, StreamClosedError
 
 from wott_hub.errors import WottHubError, http_status
@@ -26,6 +27,7 @@ from wott_hub.td.forms import CONTEXT_PATH
 from .context import ServingContext
 from .forms import PREFIX
 from .problem import MethodNotAllowed, write_problem
+from .sending import chunk, send_now
 from .things import ServedThing
 
 __all__ = ["BaseHandler", "routes"]
@@ -180,34 +182,37 @@ class _StreamHandler(_Base):
             self.write(b": stream open\n\n")  # headers out now; comments are ignored by clients
             await self.flush()
             self._last_write = time.monotonic()
-            conn = self.request.connection
-            assert conn is not None
+            # Straight to the socket (``sending.py``), not RequestHandler.flush: a future, a done-callback
+            # and a task wake-up per record on the hub's loop (docs/hub.md). Framed here as tornado frames
+            # this response: in chunks for HTTP/1.1 (a 200 with no length), as is for HTTP/1.0.
+            chunked = self.request.version == "HTTP/1.1"
+
+            def write(data: bytes) -> Future[None] | None:
+                return send_now(stream, chunk(data) if chunked else data)
 
             def direct(rec: Record) -> bool:  # push writes a record itself while the socket keeps up
                 if stream.writing() or stream.closed() or sub.gap is not None:  # the gap is said first
                     return False
                 if rec.trace is None:
-                    conn.write(rec.sse(named))
+                    write(rec.sse(named))
                 else:
-                    self._write_traced(conn, [rec], named)
+                    self._write_traced(write, [rec], named)
                 self._last_write = time.monotonic()
                 return True
 
             async for batch in sub.batches(direct):
                 if sub.gap is not None:
-                    conn.write(f": gap: records after {sub.gap[0]} before {sub.gap[1]} are not "
-                               f"recorded\n\n".encode())
+                    write(f": gap: records after {sub.gap[0]} before {sub.gap[1]} are not "
+                          f"recorded\n\n".encode())
                     sub.gap = None
                 if batch[0].trace is None:
-                    sent = conn.write(b"".join([r.sse(named) for r in batch]))
+                    sent = write(b"".join([r.sse(named) for r in batch]))
                 else:
-                    sent = self._write_traced(conn, batch, named)
+                    sent = self._write_traced(write, batch, named)
                 self._last_write = time.monotonic()
-                # Straight to the connection (it frames the chunk), not RequestHandler.flush, and
-                # wait only while the socket is backed up: per record that saves a future, a
-                # done-callback and a task wake-up on the hub's loop (docs/hub.md). A slow
-                # client still holds this loop back, and the subscriber's max_pending cuts it off.
-                if stream.writing():
+                # wait only while the socket is backed up: a slow client still holds this loop
+                # back, and the subscriber's max_pending cuts it off
+                if sent is not None:
                     await sent
         except StreamClosedError:
             pass
@@ -222,9 +227,10 @@ class _StreamHandler(_Base):
             self.finish()
 
     @staticmethod
-    def _write_traced(conn: HTTPConnection, batch: list[Record], named: bool) -> Future[None]:
+    def _write_traced(write: Callable[[bytes], Future[None] | None], batch: list[Record],
+                      named: bool) -> Future[None] | None:
         """Benchmarks only: stamp when each record was handed to the socket layer."""
-        sent = conn.write(b"".join([r.sse(named) for r in batch]))
+        sent = write(b"".join([r.sse(named) for r in batch]))
         t = time.perf_counter_ns()
         for r in batch:
             if r.trace is not None:

@@ -60,6 +60,7 @@ from wott_hub.security.scopes import Scope
 
 from .context import ServingContext
 from .problem import write_problem
+from .sending import send_now
 from .things import ServedThing
 
 __all__ = ["MAX_SUBSCRIPTIONS", "FastWebsocketHandler"]
@@ -281,7 +282,7 @@ class FastWebsocketHandler(WebsocketHandler):
             stream = conn.stream
             if stream.writing() or stream.closed():
                 return False
-            stream.write(frame(rec))
+            send_now(stream, frame(rec))
             if rec.trace is not None:
                 rec.trace["ws"] = time.perf_counter_ns()
             return True
@@ -297,10 +298,9 @@ class FastWebsocketHandler(WebsocketHandler):
                         if r.trace is not None:  # the whole batch is traced or none of it
                             r.trace["ws"] = t
                 if getattr(conn, "_compressor", None) is None:
-                    frames = b"".join([frame(r) for r in batch])
-                    fut = conn.stream.write(frames)
-                    if conn.stream.writing():  # back-pressure: wait only while the socket is backed up
-                        await fut  # (not per batch: a future wake-up per record, as for SSE)
+                    sent = send_now(conn.stream, b"".join([frame(r) for r in batch]))
+                    if sent is not None:  # back-pressure: wait only while the socket is backed up
+                        await sent  # (not per batch: a future wake-up per record, as for SSE)
                 else:
                     for r in batch:
                         fut = self.write_message(head + r.data + tail)
