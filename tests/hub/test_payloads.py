@@ -36,6 +36,14 @@ def test_texts_equal_encode_of_the_payloads_on_random_multi_contact_frames(shape
     assert {0, 1}.issubset(seen_contacts) and max(seen_contacts) >= 2
 
 
+def test_a_packet_of_no_nodes_and_one_of_a_node_id_not_seen_before_equal_encode_too():
+    from wott_hub.tactile import FrameResult
+
+    for ids, values in (([], []), ([5], [0.25]), ([3, 2_000], [1e-05, 12.5])):  # node heads made as needed
+        res = FrameResult(9, np.array(ids, dtype=np.int64), np.array(values), False, [], [], True)
+        assert skin_deformed_json(res) == encode(res.skin_deformed_detection())
+
+
 def test_a_contact_whose_numbers_are_not_finite_is_refused_as_encode_refuses_it():
     desc = example_device("flat")
     proc = FrameProcessor(desc.mesh)

@@ -16,12 +16,27 @@ from wott_hub.tactile import FrameResult
 __all__ = ["contacts_json", "skin_deformed_json"]
 
 
+_NODE_HEADS: list[str] = []
+"""Node ``i``'s ``{"deformedNodeID":<i>,"deformedNodeIntensity":``, made once per id, not per frame."""
+
+
+def _node_heads(n: int) -> list[str]:
+    """``_NODE_HEADS`` covering node ids below ``n``."""
+    heads = _NODE_HEADS
+    if len(heads) < n:
+        heads += [f'{{"deformedNodeID":{i},"deformedNodeIntensity":' for i in range(len(heads), n)]
+    return heads
+
+
 def skin_deformed_json(res: FrameResult) -> str:
     """``encode(res.skin_deformed_detection())`` (Python's float repr is what ``json`` writes)."""
-    nodes = ",".join([f'{{"deformedNodeID":{i},"deformedNodeIntensity":{v!r}}}'
-                      for i, v in zip(res.deformed_nodes.tolist(), res.intensity.tolist(), strict=True)])
-    return (f'{{"timeStamp":{res.t_ns},"numOfDeformedNodes":{len(res.deformed_nodes)},'
-            f'"arrayOfDeformedNodes":[{nodes}]}}')
+    ids = res.deformed_nodes.tolist()
+    nodes = ""
+    if ids:  # ascending: the last id is the largest
+        heads = _node_heads(ids[-1] + 1)
+        values = map(float.__repr__, res.intensity.tolist())
+        nodes = "},".join(map("".join, zip(map(heads.__getitem__, ids), values, strict=True))) + "}"
+    return f'{{"timeStamp":{res.t_ns},"numOfDeformedNodes":{len(ids)},"arrayOfDeformedNodes":[{nodes}]}}'
 
 
 def _xyz(values: list[float]) -> str:
