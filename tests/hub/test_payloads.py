@@ -39,7 +39,8 @@ def test_texts_equal_encode_of_the_payloads_on_random_multi_contact_frames(shape
 def test_a_packet_of_no_nodes_and_one_of_a_node_id_not_seen_before_equal_encode_too():
     from wott_hub.tactile import FrameResult
 
-    for ids, values in (([], []), ([5], [0.25]), ([3, 2_000], [1e-05, 12.5])):  # node heads made as needed
+    # node heads are made as ids come, and not kept past NODE_HEADS_MAX (a 2**32 id is written as is)
+    for ids, values in (([], []), ([5], [0.25]), ([3, 2_000], [1e-05, 12.5]), ([7, 2**32 + 9], [0.5, 2.0])):
         res = FrameResult(9, np.array(ids, dtype=np.int64), np.array(values), False, [], [], True)
         assert skin_deformed_json(res) == encode(res.skin_deformed_detection())
 

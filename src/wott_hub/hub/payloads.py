@@ -19,23 +19,26 @@ __all__ = ["contacts_json", "skin_deformed_json"]
 _NODE_HEADS: list[str] = []
 """Node ``i``'s ``{"deformedNodeID":<i>,"deformedNodeIntensity":``, made once per id, not per frame."""
 
+NODE_HEADS_MAX = 1 << 16
+"""Ids up to this have their head kept (a mesh has a few thousand nodes); larger ones (only ever
+seen in tests) are written per packet."""
 
-def _node_heads(n: int) -> list[str]:
-    """``_NODE_HEADS`` covering node ids below ``n``."""
-    heads = _NODE_HEADS
-    if len(heads) < n:
-        heads += [f'{{"deformedNodeID":{i},"deformedNodeIntensity":' for i in range(len(heads), n)]
-    return heads
+
+def _head(i: int) -> str:
+    return f'{{"deformedNodeID":{i},"deformedNodeIntensity":'
 
 
 def skin_deformed_json(res: FrameResult) -> str:
     """``encode(res.skin_deformed_detection())`` (Python's float repr is what ``json`` writes)."""
     ids = res.deformed_nodes.tolist()
     nodes = ""
-    if ids:  # ascending: the last id is the largest
-        heads = _node_heads(ids[-1] + 1)
+    if ids:
+        heads, top = _NODE_HEADS, max(ids)
+        if len(heads) <= top < NODE_HEADS_MAX:
+            heads += map(_head, range(len(heads), top + 1))
+        head = heads.__getitem__ if top < len(heads) else _head
         values = map(float.__repr__, res.intensity.tolist())
-        nodes = "},".join(map("".join, zip(map(heads.__getitem__, ids), values, strict=True))) + "}"
+        nodes = "},".join(map("".join, zip(map(head, ids), values, strict=True))) + "}"
     return f'{{"timeStamp":{res.t_ns},"numOfDeformedNodes":{len(ids)},"arrayOfDeformedNodes":[{nodes}]}}'
 
 
