@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from wott_hub.configspec import ConfigError, check, doc, json_schema, read, says, table_of
+from wott_hub.configspec import ConfigError, Flag, check, doc, json_schema, read, says, table_of
 from wott_hub.mqtt.config import MQTT_TABLE, MqttConfig, parse_mqtt
 from wott_hub.network.config import (
     DIRECTORY_TABLE,
@@ -37,7 +37,6 @@ MAX_WORKERS = 64
 """Worker processes at most: beyond a few per core they only add memory and context switches."""
 
 Text = Annotated[str, says("a non-empty string", pattern=r"\S")]
-Flag = Annotated[bool, says("true or false")]
 Port = Annotated[int, says("a port number (0: any free port)", ge=0, le=65535)]
 Days = Annotated[float, says("a positive number", gt=0, le=36_500)]
 Megabytes = Annotated[float, says("a positive number", gt=0, le=1e9)]

@@ -29,8 +29,8 @@ import msgspec.json
 
 from wott_hub.errors import ConfigError
 
-__all__ = ["ConfigError", "Model", "bounded", "check", "doc", "explain", "json_schema", "range_text", "read",
-           "says", "table_of"]
+__all__ = ["ConfigError", "Flag", "Model", "bounded", "check", "doc", "explain", "json_schema", "range_text",
+           "read", "says", "table_of"]
 
 
 class Model(msgspec.Struct, kw_only=True, forbid_unknown_fields=True):
@@ -41,6 +41,10 @@ def says(phrase: str, **meta: Any) -> msgspec.Meta:
     """msgspec constraints ``meta`` plus the ``phrase`` an error says is expected, for ``Annotated``:
     ``Annotated[int, says("a port number (0: any free port)", ge=0, le=65535)]``."""
     return msgspec.Meta(**meta, extra={"expects": phrase})
+
+
+Flag = Annotated[bool, says("true or false")]
+"""A yes/no setting (TOML ``true``/``false``)."""
 
 
 def bounded(phrase: str, *, ge: float | None = None, gt: float | None = None,

@@ -12,12 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
-from wott_hub.configspec import ConfigError, Model, bounded, check, doc, read, says, table_of
+from wott_hub.configspec import ConfigError, Flag, Model, bounded, check, doc, read, says, table_of
 
 __all__ = ["DIRECTORY_TABLE", "DISCOVERY_TABLE", "DirectoryConfig", "DiscoveryConfig", "Registration",
            "embedded_directory_settings", "parse_directory", "parse_discovery"]
 
-Flag = Annotated[bool, says("true or false")]
 Token = Annotated[str, says("a non-empty string", pattern=r"\S")]
 Url = Annotated[str, says("an http(s) URL", pattern=r"^https?://[^/?#\s]+")]
 Urls = Annotated[tuple[Url, ...], says("a list of directory URLs")]

@@ -15,13 +15,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any
 
-from wott_hub.configspec import ConfigError, Model, doc, read, says, table_of
+from wott_hub.configspec import ConfigError, Flag, Model, doc, read, says, table_of
 
 from .tokens import StoredToken
 
 __all__ = ["SECURITY_TABLE", "SecurityConfig", "parse_security"]
 
-Flag = Annotated[bool, says("true or false")]
 Text = Annotated[str, says("a non-empty string", pattern=r"\S")]
 Origin = Annotated[str, says("an origin like https://host:port", pattern=r"^https?://[^/?#\s]+$")]
 Origins = Annotated[tuple[Origin, ...], says("a list of origins")]
