@@ -2,7 +2,7 @@
 frame -> MQTT subscriber at 32 devices x 120 Hz (issue 13; targets: >= 10,000/s, p99 <= 10 ms).
 
     uv run wott-hub bench mqtt [--quick] [--no-write] [--groups throughput,latency] [--devices 32]
-                               [--seconds 5]
+                               [--seconds 5] [--runs 3]
 
 A real Mosquitto (Debian's ``mosquitto``) on 127.0.0.1 and a free port, started here. The
 subscriber is its own process (paho, one subscription, QoS 0 as the hub publishes
@@ -35,6 +35,7 @@ import os
 import random
 import shutil
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -148,15 +149,18 @@ class Subscriber:
         self.proc.stdin.flush()
         out = await asyncio.wait_for(asyncio.to_thread(self.proc.stdout.readline), 120)
         self.proc.wait(30)
+        if not out:
+            raise RuntimeError(f"the subscriber ended ({self.proc.returncode}) with no result: "
+                               f"{self.proc.stderr.read()[-2000:]}")
         return json.loads(out)
 
 
-def hub_config(broker: Mosquitto, tmp: Path, *, history: bool):
+def hub_config(broker: Mosquitto, tmp: Path, *, history: bool, immediate: bool = True):
     from wott_hub.config import HubConfig
     from wott_hub.mqtt import MqttConfig
 
     return HubConfig(id="bench", http_port=0, ws_port=None, history=history, database=str(tmp / "bench.db"),
-                     mqtt=MqttConfig(url=broker.url, queue_max=1_000_000))
+                     mqtt=MqttConfig(url=broker.url, queue_max=1_000_000, immediate=immediate))
 
 
 async def _connected(hub) -> None:
@@ -225,13 +229,13 @@ async def throughput(broker: Mosquitto, tmp: Path, rates: list[int], seconds: fl
 
 # --- 2. latency -----------------------------------------------------------------------------------
 
-async def latency(broker: Mosquitto, tmp: Path, n_dev: int, seconds: float) -> dict:
+async def latency(broker: Mosquitto, tmp: Path, n_dev: int, seconds: float, immediate: bool) -> dict:
     from bench_hub.latency import make_driver_class, press_frames
 
     from wott_hub.examples import example_device
     from wott_hub.hub import Hub
 
-    hub = Hub(hub_config(broker, tmp, history=True))
+    hub = Hub(hub_config(broker, tmp, history=True, immediate=immediate))
     hub.plane.trace = True
     await hub.start()
     try:
@@ -299,23 +303,33 @@ async def main(args: argparse.Namespace) -> None:
                             ["offered/s", "sent/s", "received/s at the subscriber", "sent", "lost",
                              "dropped by the hub"], rows))
         if "latency" in groups:
-            res = await latency(broker, tmp, args.devices, args.seconds)
-            print(f"latency {res['devices']} devices x 120 Hz: frames offered {res['offered']}, processed "
-                  f"{res['processed']}; MQTT messages received {res['received']}, lost {res['lost']} "
-                  f"(dropped by the hub {res['dropped']}); p50 {res['p50_ms']:.2f} ms, "
-                  f"p99 {res['p99_ms']:.2f} ms (target <= 10), max {res['max_ms']:.1f} ms; "
-                  f"publisher {res['published_per_s']:,.0f} msg/s, "
-                  f"queue {res['queued'][0]} -> {res['queued'][1]}; hub CPU {res['hub_cpu']:.0f} % of a core",
-                  flush=True)
-            body.append(f"Latency frame in -> MQTT subscriber, {res['devices']} devices x 120 Hz "
-                        f"(history on, SQLite), {args.seconds:g} s; target p99 ≤ 10 ms. Offered: frames the "
-                        "drivers were due to yield; processed: their events on the plane; lost: processed "
-                        "and not at the subscriber within 60 s.\n\n" + markdown_table(
-                            ["devices", "frames offered", "processed", "received", "lost", "p50 ms",
-                             "p99 ms", "max ms", "MQTT messages/s sent", "hub CPU %"],
-                            [[res["devices"], res["offered"], res["processed"], res["received"], res["lost"],
-                              f"{res['p50_ms']:.2f}", f"{res['p99_ms']:.2f}", f"{res['max_ms']:.1f}",
-                              f"{res['published_per_s']:,.0f}", f"{res['hub_cpu']:.0f}"]]))
+            rows = []
+            for run in range(1, args.runs + 1):  # the two settings alternated: this machine drifts
+                for immediate in (True, False):
+                    res = await latency(broker, tmp, args.devices, args.seconds, immediate)
+                    print(f"latency {res['devices']} devices x 120 Hz, immediate = {str(immediate).lower()}: "
+                          f"frames offered {res['offered']}, processed {res['processed']}; MQTT messages "
+                          f"received {res['received']}, lost {res['lost']} (dropped by the hub "
+                          f"{res['dropped']}); p50 {res['p50_ms']:.2f} ms, p99 {res['p99_ms']:.2f} ms "
+                          f"(target <= 10), max {res['max_ms']:.1f} ms; publisher "
+                          f"{res['published_per_s']:,.0f} msg/s, queue {res['queued'][0]} -> "
+                          f"{res['queued'][1]}; hub CPU {res['hub_cpu']:.0f} % of a core", flush=True)
+                    rows.append([str(immediate).lower(), run, res["offered"], res["processed"],
+                                 res["received"], res["lost"], f"{res['p50_ms']:.2f}", f"{res['p99_ms']:.2f}",
+                                 f"{res['max_ms']:.1f}", f"{res['published_per_s']:,.0f}",
+                                 f"{res['hub_cpu']:.0f}"])
+            of = {setting: [r for r in rows if r[0] == setting] for setting in ("true", "false")}
+            medians = "; ".join(f"immediate = {k}: p99 {statistics.median(float(r[7]) for r in v):.2f} ms, "
+                                f"{statistics.median(r[3] for r in v):,.0f} frames processed"
+                                for k, v in of.items())
+            body.append(f"Latency frame in -> MQTT subscriber, {args.devices} devices x 120 Hz "
+                        f"(history on, SQLite), {args.seconds:g} s a run, `[mqtt] immediate` on and off "
+                        "alternated; target p99 ≤ 10 ms. Offered: frames the drivers were due to yield; "
+                        "processed: their events on the plane; lost: processed and not at the subscriber "
+                        "within 60 s.\n\n" + markdown_table(
+                            ["immediate", "run", "frames offered", "processed", "received", "lost", "p50 ms",
+                             "p99 ms", "max ms", "MQTT messages/s sent", "hub CPU %"], rows)
+                        + f"\n\nMedians of {args.runs}: {medians}.")
     finally:
         broker.stop()
         shutil.rmtree(tmp, ignore_errors=True)
@@ -331,13 +345,16 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--no-write", action="store_true", help="print only; leave docs/benchmarks.md alone")
     ap.add_argument("--groups", default="throughput,latency", help="comma-separated: throughput,latency")
     ap.add_argument("--devices", type=int, default=32, help="devices at 120 Hz in the latency group")
-    ap.add_argument("--seconds", type=float, default=5.0, help="measured seconds per rate and for latency")
+    ap.add_argument("--seconds", type=float, default=5.0, help="seconds measured per rate, per latency run")
+    ap.add_argument("--runs", type=int, default=3, help="latency runs of each `immediate` setting")
     args = ap.parse_args()
     unknown = set(args.groups.split(",")) - {"throughput", "latency"}
     if unknown:
         ap.error(f"unknown group {', '.join(sorted(unknown))} (throughput, latency)")
     if args.devices < 1:
         ap.error("--devices: at least 1")
+    if args.runs < 1:
+        ap.error("--runs: at least 1")
     if not args.seconds > 0:
         ap.error("--seconds: a positive number")
     return args

@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 import jsonschema
+import pytest
 
 from wott_hub.config import HubConfig
 from wott_hub.hub import Hub
@@ -162,6 +163,39 @@ def test_bursts_of_every_size_and_qos_arrive_whole_and_in_order_per_topic(tmp_pa
                 got.setdefault(topic, []).append(payload)
             assert got == sent
             assert hub.mqtt.dropped == 0
+
+    run(scenario(), timeout=120)
+
+
+@pytest.mark.parametrize("immediate", [True, False])
+def test_a_message_put_while_nothing_waits_is_written_at_once_or_batched_and_all_keep_their_order(
+        tmp_path, broker, mqtt_reader, run, wait_for, immediate):
+    """``[mqtt] immediate``: a QoS 0 message put while nothing waits is on the socket when ``put``
+    returns; one larger than the socket takes leaves its rest to paho, and what follows waits
+    behind it in the queue. Off: every message waits for the publisher's batch."""
+    cfg = HubConfig(name="cell", http_port=0, ws_port=None, history=False,
+                    mqtt=MqttConfig(url=broker.url, immediate=immediate))
+
+    async def scenario() -> None:
+        async with Hub(cfg) as hub, mqtt_reader(broker.url, "now/#") as reader:
+            mq = hub.mqtt
+            await wait_for(lambda: mq.connected and mq.idle, timeout=10,
+                           what="the publisher idle")
+            sent = [(f"now/{'ab'[i % 2]}", f"{i}:".encode().ljust(16_000_000 if i == 3 else 100, b"x"))
+                    for i in range(300)]
+            published = mq.published
+            for i, (topic, payload) in enumerate(sent):
+                mq.put((topic, payload, 0, False))
+                if i == 0:  # nothing waited before it
+                    assert (mq.published - published, len(mq.queue)) == ((1, 0) if immediate else (0, 1))
+                if i == 4 and immediate:  # behind the rest of the 16 MB message, which paho holds
+                    assert mq.queue
+                if i % 10 == 0:
+                    await asyncio.sleep(0)  # the publisher's turn: it sends what waits
+            await wait_for(lambda: len(reader.messages) >= len(sent), timeout=60,
+                           what=lambda: f"{len(reader.messages)} of {len(sent)} messages")
+            for name in ("now/a", "now/b"):
+                assert [p for t, p, _ in reader.messages if t == name] == [p for t, p in sent if t == name]
 
     run(scenario(), timeout=120)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
-from wott_hub.configspec import ConfigError, check, doc, read, says, table_of
+from wott_hub.configspec import ConfigError, Flag, check, doc, read, says, table_of
 
 __all__ = ["MQTT_TABLE", "MqttConfig", "parse_mqtt"]
 
@@ -34,6 +34,10 @@ class MqttConfig:
     event_qos: Qos = field(default=0, metadata=doc(
         "QoS of what changes every frame: the skinDeformedDetection event and the "
         "contactInformation property (retained); other events, properties and the TDs use 1."))
+    immediate: Flag = field(default=True, metadata=doc(
+        "Write each QoS 0 message to the broker the moment it is made while nothing waits before "
+        "it (lowest latency); false: every message waits for the publisher's next batch, one write "
+        "per batch (fewer writes: more frames processed on a saturated hub; docs/scale-out.md)."))
     queue_max: QueueMax = field(default=100_000, metadata=doc(
         "Messages waiting for the broker at most; beyond, the oldest are dropped and counted "
         "(a slow or absent broker never slows the hub)."))
