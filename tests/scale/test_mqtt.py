@@ -200,6 +200,26 @@ def test_a_message_put_while_nothing_waits_is_written_at_once_or_batched_and_all
     run(scenario(), timeout=120)
 
 
+def test_a_message_that_fails_to_be_written_at_once_stays_in_the_publisher(tmp_path, broker, mqtt_reader, run,
+                                                                          wait_for):
+    """``put`` runs inside the event plane's publish, on a device's pipeline: whatever writing at once
+    raises (here a payload that is not text) is logged there, never raised; writing at once stops
+    until the next connection and the next messages still arrive."""
+    cfg = HubConfig(name="cell", http_port=0, ws_port=None, history=False, mqtt=MqttConfig(url=broker.url))
+
+    async def scenario() -> None:
+        async with Hub(cfg) as hub, mqtt_reader(broker.url, "now/#") as reader:
+            mq = hub.mqtt
+            await wait_for(lambda: mq.connected and mq.idle, timeout=10, what="the publisher idle")
+            mq.put(("now/bad", 12345, 0, False))  # type: ignore[arg-type]  # not raised here
+            await wait_for(lambda: mq.connected and mq.idle, timeout=10, what="the publisher idle again")
+            mq.put(("now/ok", b"after", 0, False))
+            await wait_for(lambda: any(t == "now/ok" for t, _, _ in reader.messages), timeout=10,
+                           what="the next message")
+
+    run(scenario(), timeout=60)
+
+
 def test_no_mqtt_without_its_table_and_no_mqtt_library_loaded(tmp_path):
     code = """
 import asyncio, json, sys

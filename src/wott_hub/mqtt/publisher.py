@@ -160,6 +160,7 @@ class MqttPublisher:
         self._wake = asyncio.Event()
         self.idle = False  # everything handed over is on the socket, the publisher waits for more
         self._direct: Callable[[Message], bool] | None = None  # set while the publisher waits, if immediate
+        self._immediate = cfg.immediate  # off after a failure, until the next connection
         self._task: asyncio.Task[None] | None = None
         self._client: aiomqtt.Client | None = None
 
@@ -180,9 +181,14 @@ class MqttPublisher:
 
     def put(self, msg: Message) -> None:
         queue = self.queue
-        if not queue and self._direct is not None and not msg[2] and self._direct(msg):
-            self.published += 1
-            return
+        if not queue and self._direct is not None and not msg[2]:
+            try:  # inside the event plane's publish: nothing of paho's may reach the device's pipeline
+                if self._direct(msg):
+                    self.published += 1
+                    return
+            except Exception:
+                log.exception("MQTT: writing a message at once failed; batches only until reconnected")
+                self._direct, self._immediate = None, False
         if len(queue) >= self.cfg.queue_max:
             queue.popleft()
             self.dropped += 1
@@ -281,6 +287,7 @@ class MqttPublisher:
         if isinstance(sock, socket.socket):  # one small message per event: Nagle would hold them up
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # to 40 ms+ (delayed ACKs)
         plain = sock if type(sock) is socket.socket else None  # TLS: paho writes every record
+        self._immediate = self.cfg.immediate
         heads: dict[str, bytes] = {}  # topic -> its encoded length and name (MQTT 3.1.1: no properties)
 
         def direct(msg: Message) -> bool:  # ``put``, while nothing waits: the message written at once
@@ -295,7 +302,7 @@ class MqttPublisher:
             if not queue:
                 wake.clear()
                 self.idle = True  # everything handed over is on the socket
-                self._direct = direct if self.cfg.immediate else None
+                self._direct = direct if self._immediate else None
                 await wake.wait()
                 self._direct = None
                 self.idle = False
