@@ -93,35 +93,61 @@ async def _sse_client(urls: list[str], duration: float) -> dict:
     return {"events": got}
 
 
-class _LeanSSE(asyncio.Protocol):
-    """One SSE stream over HTTP/1.1 chunked transfer, parsed in place: the instrument should not
-    need the core the hub is measured on. httpx + httpx-sse (``_sse_client``) spend ~200 us of
-    CPU per event (~70 % of a core at 3,300 events/s on this machine); this ~10x less. It still
-    reads every byte, splits messages, takes ``id`` and decodes ``data`` as JSON."""
+class _Lean(asyncio.Protocol):
+    """A stream client parsed in place: ``request`` written on connect, the response head checked
+    (``status``) and skipped, then ``body`` given what has come (it returns what it could not parse
+    yet) with the time it came. The instrument should not need the core the hub is measured on."""
 
-    def __init__(self, i: int, request: bytes, got: list, connected: asyncio.Future) -> None:
-        self.i, self.request, self.got, self.connected = i, request, got, connected
-        self.raw = b""  # bytes not yet de-chunked
-        self.body = b""  # de-chunked SSE text not yet a whole message
-        self.headers_done = False
+    status = b""
+
+    def __init__(self, i: int, request: bytes, got: list, opened: asyncio.Future) -> None:
+        self.i, self.request, self.got, self.opened = i, request, got, opened
+        self.raw = b""  # bytes not yet parsed
+        self.head_done = False
+        self.transport: asyncio.Transport | None = None
 
     def connection_made(self, transport) -> None:
+        self.transport = transport
         transport.write(self.request)
 
     def data_received(self, data: bytes) -> None:
         t = now_ns()
         raw = self.raw + data
-        if not self.headers_done:
+        if not self.head_done:
             end = raw.find(b"\r\n\r\n")
             if end < 0:
                 self.raw = raw
                 return
-            if not raw.startswith(b"HTTP/1.1 200"):
+            if not raw.startswith(self.status):
                 raise RuntimeError(raw[:200])
-            self.headers_done = True
+            self.head_done = True
             raw = raw[end + 4:]
-            self.connected.set_result(None)
-        body = [self.body]
+            self.head()
+        self.raw = self.body(raw, t)
+
+    def head(self) -> None:
+        """The response head has come."""
+
+    def body(self, raw: bytes, t: int) -> bytes:
+        raise NotImplementedError
+
+
+class _LeanSSE(_Lean):
+    """One SSE stream over HTTP/1.1 chunked transfer. httpx + httpx-sse (``_sse_client``) spend
+    ~200 us of CPU per event (~70 % of a core at 3,300 events/s on this machine); this ~10x less.
+    It still reads every byte, splits messages, takes ``id`` and decodes ``data`` as JSON."""
+
+    status = b"HTTP/1.1 200"
+
+    def __init__(self, *args) -> None:
+        super().__init__(*args)
+        self.text = b""  # de-chunked SSE text not yet a whole message
+
+    def head(self) -> None:
+        self.opened.set_result(None)
+
+    def body(self, raw: bytes, t: int) -> bytes:
+        body = [self.text]
         while raw:  # chunked transfer: <hex size>\r\n<data>\r\n
             eol = raw.find(b"\r\n")
             if eol < 0:
@@ -131,17 +157,19 @@ class _LeanSSE(asyncio.Protocol):
                 break
             body.append(raw[eol + 2:eol + 2 + size])
             raw = raw[eol + 4 + size:]
-        self.raw = raw
-        *messages, self.body = b"".join(body).split(b"\n\n")
+        *messages, self.text = b"".join(body).split(b"\n\n")
         for m in messages:
             if not m.startswith(b"id: "):
                 continue  # a comment (": stream open", ": ping")
             head, _, data = m.partition(b"\ndata: ")
             stamp = json.loads(data).get("timeStamp", 0)
             self.got.append((self.i, int(head[4:]), t, now_ns(), stamp))
+        return raw
 
 
-async def _sse_lean_client(urls: list[str], duration: float) -> dict:
+async def _lean_clients(urls: list[str], duration: float, make, request) -> dict:
+    """One ``make(i, request(path, netloc), got, opened)`` connection per URL, each open (its
+    ``opened`` set) before the next; then received for ``duration``."""
     from urllib.parse import urlsplit
 
     loop = asyncio.get_running_loop()
@@ -149,16 +177,20 @@ async def _sse_lean_client(urls: list[str], duration: float) -> dict:
     transports = []
     for i, url in enumerate(urls):
         u = urlsplit(url)
-        request = (f"GET {u.path} HTTP/1.1\r\nHost: {u.netloc}\r\nAccept: text/event-stream\r\n\r\n").encode()
-        connected = loop.create_future()
-        tr, _ = await loop.create_connection(lambda i=i, r=request, f=connected: _LeanSSE(i, r, got, f),
-                                             u.hostname, u.port)
-        await asyncio.wait_for(connected, 30)
+        opened = loop.create_future()
+        tr, _ = await loop.create_connection(
+            lambda i=i, r=request(u.path, u.netloc), f=opened: make(i, r, got, f), u.hostname, u.port)
+        await asyncio.wait_for(opened, 30)
         transports.append(tr)
     await _measure([], duration)
     for tr in transports:
         tr.close()
     return {"events": got}
+
+
+async def _sse_lean_client(urls: list[str], duration: float) -> dict:
+    return await _lean_clients(urls, duration, _LeanSSE, lambda path, host: (
+        f"GET {path} HTTP/1.1\r\nHost: {host}\r\nAccept: text/event-stream\r\n\r\n").encode())
 
 
 async def _wotpy_client(urls: list[str], duration: float, event: str) -> dict:
@@ -232,36 +264,20 @@ def _masked_text_frame(text: str) -> bytes:
     return head + key + bytes(b ^ key[k % 4] for k, b in enumerate(payload))
 
 
-class _LeanWS(asyncio.Protocol):
-    """One JSON-RPC event subscription over a WebSocket, its frames parsed in place (the server's
-    are unmasked): tornado's client reads each message through several awaits and a task switch,
-    ~46 % of a core at 32 devices on this machine; the instrument should not need the core the hub
-    is measured on. It still reads every byte and decodes every message as JSON."""
+class _LeanWS(_Lean):
+    """One JSON-RPC event subscription over a WebSocket, the server's (unmasked) frames parsed in
+    place: tornado's client reads each message through several awaits and a task switch, ~46 % of
+    a core at 32 devices on this machine. It still reads every byte and decodes every message as
+    JSON. ``opened``: set by the answer to the subscribe request."""
 
-    def __init__(self, i: int, request: bytes, subscribe: bytes, got: list, started: asyncio.Future) -> None:
-        self.i, self.request, self.subscribe, self.got, self.started = i, request, subscribe, got, started
-        self.raw = b""
-        self.transport: asyncio.Transport | None = None
-        self.upgraded = False
+    status = b"HTTP/1.1 101"
+    subscribe = b""  # the request's masked frame (``_ws_latency_client``)
 
-    def connection_made(self, transport) -> None:
-        self.transport = transport
-        transport.write(self.request)
+    def head(self) -> None:
+        assert self.transport is not None
+        self.transport.write(self.subscribe)
 
-    def data_received(self, data: bytes) -> None:
-        t = now_ns()
-        raw = self.raw + data
-        if not self.upgraded:
-            end = raw.find(b"\r\n\r\n")
-            if end < 0:
-                self.raw = raw
-                return
-            if not raw.startswith(b"HTTP/1.1 101"):
-                raise RuntimeError(raw[:200])
-            self.upgraded = True
-            raw = raw[end + 4:]
-            assert self.transport is not None
-            self.transport.write(self.subscribe)
+    def body(self, raw: bytes, t: int) -> bytes:
         pos = 0
         while len(raw) - pos >= 2:  # frames: FIN|opcode, length (7, 16 or 64 bits), payload
             opcode, n, at = raw[pos] & 0x0F, raw[pos + 1] & 0x7F, pos + 2
@@ -279,40 +295,27 @@ class _LeanWS(asyncio.Protocol):
             if opcode != 1:  # the hub sends only whole text frames to a subscriber
                 continue
             doc = json.loads(raw[at:pos])
-            if not self.started.done():  # the subscribe request's answer
-                self.started.set_result(None)
+            if not self.opened.done():  # the subscribe request's answer
+                self.opened.set_result(None)
                 continue
             data = doc.get("data")
             if data is not None:  # (None: a subscription error, cut off for falling behind)
                 self.got.append((self.i, data["timeStamp"], t, now_ns()))
-        self.raw = raw[pos:]
+        return raw[pos:]
 
 
 async def _ws_latency_client(urls: list[str], event: str, duration: float) -> dict:
     """Raw JSON-RPC subscriptions to several Things: arrival time of each event (no wotpy client)."""
     import base64
-    from urllib.parse import urlsplit
 
-    loop = asyncio.get_running_loop()
-    got: list[tuple] = []
-    transports = []
-    subscribe = _masked_text_frame(json.dumps({"jsonrpc": "2.0", "method": "on_event",
-                                               "params": {"name": event}, "id": "sub"}))
-    for i, url in enumerate(urls):
-        u = urlsplit(url)
-        key = base64.b64encode(os.urandom(16)).decode()
-        request = (f"GET {u.path} HTTP/1.1\r\nHost: {u.netloc}\r\nUpgrade: websocket\r\n"
-                   f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
-                   ).encode()
-        started = loop.create_future()
-        tr, _ = await loop.create_connection(
-            lambda i=i, r=request, f=started: _LeanWS(i, r, subscribe, got, f), u.hostname, u.port)
-        await asyncio.wait_for(started, 30)
-        transports.append(tr)
-    await _measure([], duration)
-    for tr in transports:
-        tr.close()
-    return {"events": got}
+    class Subscription(_LeanWS):
+        subscribe = _masked_text_frame(json.dumps({"jsonrpc": "2.0", "method": "on_event",
+                                                   "params": {"name": event}, "id": "sub"}))
+
+    return await _lean_clients(urls, duration, Subscription, lambda path, host: (
+        f"GET {path} HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        f"Sec-WebSocket-Key: {base64.b64encode(os.urandom(16)).decode()}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    ).encode())
 
 
 def _td_get_client(urls: list[str], n: int) -> dict:
