@@ -60,7 +60,7 @@ class BarrelSimulator:
         """(images, truth) at scene time ``t_s``.
 
         The skin at rest looks the same until something touches it: its pictures are drawn
-        once and only the sensor noise is new on each frame (the same bytes, a third of the cost).
+        once and only the sensor noise is new on each frame (the same bytes, a tenth of the cost).
         """
         truth = self.truth(t_s)
         if self.scene.touching(t_s):

@@ -12,6 +12,14 @@ sparse sum (``np.bincount``), so 256 markers cost about a millisecond.
 ``marker_picture`` is the noiseless, blurred picture and ``expose`` adds the
 sensor noise: a simulator whose skin is at rest draws its picture once and
 exposes it on every frame, the same bytes ``render_markers`` would give.
+
+The noise of a frame is a window, at an offset drawn from the caller's
+generator, of one bank of standard normal values made once per frame size
+(twice the frame, fixed seed): within a frame every pixel's noise is an
+independent Gaussian draw, as before, and two frames share a noise field only
+when their offsets coincide (1 in H x W). Drawing a frame of Gaussian values
+was the most expensive step of a simulated camera at rest (~1.2 ms of 1.3 for
+640 x 480); a window and one fused OpenCV pass cost ~0.15 ms.
 """
 
 from __future__ import annotations
@@ -95,18 +103,33 @@ def marker_picture(
 
 
 def expose(picture: np.ndarray, noise_std: float = 0.0, rng: np.random.Generator | None = None) -> np.ndarray:
-    """``picture`` (float32, left unchanged) with sensor noise of ``noise_std`` grey levels, as uint8."""
-    img = picture
-    if noise_std and noise_std > 0:
-        import cv2
+    """``picture`` (float32, left unchanged) with sensor noise of ``noise_std`` grey levels, as uint8.
 
-        # OpenCV's generator is 5x faster than NumPy's for a frame of noise; seeding it from
-        # ``rng`` keeps a render reproducible (OpenCV's generator is per thread)
-        rng = rng if rng is not None else np.random.default_rng()
-        cv2.setRNGSeed(int(rng.integers(2**31 - 1)))
-        noise = np.empty_like(picture)
-        # OpenCV's stubs take only arrays for mean and stddev; it takes scalars as well
-        cv2.randn(noise, 0.0, float(noise_std))  # type: ignore[call-overload]
-        img = picture + noise
-    image: np.ndarray = np.clip(np.rint(img), 0, 255).astype(np.uint8)
-    return image
+    Rounded half to even and saturated to 0..255, as ``np.clip(np.rint(...))`` would.
+    """
+    picture = np.ascontiguousarray(picture, dtype=np.float32)  # OpenCV's layout
+    if not (noise_std and noise_std > 0):
+        image: np.ndarray = np.clip(np.rint(picture), 0, 255).astype(np.uint8)
+        return image
+    import cv2
+
+    rng = rng if rng is not None else np.random.default_rng()
+    n = picture.size
+    offset = int(rng.integers(n + 1))
+    noise = _noise_bank(n)[offset:offset + n].reshape(picture.shape)
+    exposed: np.ndarray = cv2.addWeighted(picture, 1.0, noise, float(noise_std), 0.0, dtype=cv2.CV_8U)
+    return exposed
+
+
+NOISE_BANK_SEED = 0x5E_4509
+_noise_banks: dict[int, np.ndarray] = {}
+
+
+def _noise_bank(n: int) -> np.ndarray:
+    """2n standard normal float32 values for frames of n pixels, made on first use (a race makes
+    the same values twice: harmless)."""
+    bank = _noise_banks.get(n)
+    if bank is None:
+        rng = np.random.default_rng(NOISE_BANK_SEED)
+        bank = _noise_banks[n] = rng.standard_normal(2 * n, dtype=np.float32)
+    return bank
