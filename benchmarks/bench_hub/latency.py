@@ -344,7 +344,8 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
             runs = [r] + [await latency_ours(n, dur, tmp, with_wotpy=False) for _ in range(2)]
             runs.sort(key=lambda x: x["sse"][3])
             r = runs[1]
-            repeats.append((n, [x["sse"][3] for x in runs], [x["ws"][3] for x in runs]))
+            repeats.append((n, [x["sse"][3] for x in runs], [x["ws"][3] for x in runs],
+                            [x["sse"][0] / dur for x in runs]))
         # plain wotpy saturates at 8 devices already (and exposing 32 there is O(N^3))
         p = await latency_plain(n, dur) if n <= 8 else None
         rows.append([n, f"{r['sse'][0] / dur:.0f} / {n * 120}", cell(r["sse"]), cell(r["ws"]),

@@ -9,6 +9,7 @@ them when a table changes.
 from __future__ import annotations
 
 import re
+import statistics
 
 from report import DOC, markdown_table, write_section  # benchmarks/report.py, shared by every benchmark
 
@@ -32,8 +33,10 @@ def cell(t) -> str:
 def latency(res: dict) -> str:
     repeats = "".join(
         f"\n\n{n} devices, {len(sse)} runs (the median run by SSE p99 is shown): SSE p99 "
-        + ", ".join(ms(x) for x in sse) + " ms; hub WS p99 " + ", ".join(ms(x) for x in ws) + " ms."
-        for n, sse, ws in res["repeats"])
+        + ", ".join(ms(x) for x in sse) + " ms; hub WS p99 " + ", ".join(ms(x) for x in ws)
+        + " ms; frames/s processed " + ", ".join(f"{x:.0f}" for x in fps)
+        + f" (median {statistics.median(fps):.0f})."
+        for n, sse, ws, fps in res["repeats"])
     out = (
         f"### Latency: a frame enters the pipeline -> its event at a client (ms, p50 / p99; "
         f"{res['duration']:g} s per point)\n\n"
