@@ -16,10 +16,10 @@ exposes it on every frame, the same bytes ``render_markers`` would give.
 The noise of a frame is a window, at an offset drawn from the caller's
 generator, of one bank of standard normal values made once per frame size
 (twice the frame, fixed seed): within a frame every pixel's noise is an
-independent Gaussian draw, as before, and two frames share a noise field only
-when their offsets coincide (1 in H x W). Drawing a frame of Gaussian values
-was the most expensive step of a simulated camera at rest (~1.2 ms of 1.3 for
-640 x 480); a window and one fused OpenCV pass cost ~0.15 ms.
+independent Gaussian draw, and two frames share a noise field only when their
+offsets coincide (1 in H x W). Drawing a frame of Gaussian values was the most
+expensive step of a simulated camera at rest (~1.2 ms of 1.3 for 640 x 480);
+a window and one fused OpenCV pass cost ~0.1 ms.
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ def expose(picture: np.ndarray, noise_std: float = 0.0, rng: np.random.Generator
     return exposed
 
 
-NOISE_BANK_SEED = 0x5E_4509
+_NOISE_BANK_SEED = 0x5E_4509
 _noise_banks: dict[int, np.ndarray] = {}
 
 
@@ -130,6 +130,6 @@ def _noise_bank(n: int) -> np.ndarray:
     the same values twice: harmless)."""
     bank = _noise_banks.get(n)
     if bank is None:
-        rng = np.random.default_rng(NOISE_BANK_SEED)
+        rng = np.random.default_rng(_NOISE_BANK_SEED)
         bank = _noise_banks[n] = rng.standard_normal(2 * n, dtype=np.float32)
     return bank
