@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import inspect
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,26 @@ async def _wait_for(predicate, timeout: float = 15.0, what: Any = "condition", e
 def wait_for():
     """``await wait_for(predicate, timeout=..., what=...)`` inside a test's event loop."""
     return _wait_for
+
+
+def _eventually(predicate, timeout: float = 15.0, what: Any = "condition", every: float = 0.05) -> Any:
+    """Poll ``predicate`` from a plain (thread) test until it gives a true value, and return it; fail
+    naming ``what`` after ``timeout`` s. A test waits for what it asserts, never for a fixed sleep: a
+    hub started by the test's own module has had no time to commit, publish or count anything yet."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what() if callable(what) else what}: not met within {timeout} s")
+        time.sleep(every)
+
+
+@pytest.fixture(scope="session")
+def eventually():
+    """``eventually(predicate, timeout=..., what=...)`` -> the predicate's first true value."""
+    return _eventually
 
 
 def _run(coro: Any, timeout: float = 60) -> Any:

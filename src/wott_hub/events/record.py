@@ -94,6 +94,13 @@ class Record:
             frame = self._sse = f"id: {self.seq}\ndata: {self.data}\n\n".encode()
         return frame
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Across a pipe (a worker's records, a batch for the history process): the fields only,
+        the skin arrays as raw bytes (``SkinArrays.to_wire``), never the SSE frames cached here.
+        A record not yet numbered by the plane carries ``seq`` 0."""
+        skin = None if self.skin is None else self.skin.to_wire()
+        return (_revive, (self.thing, self.seq, self.kind, self.name, self.t_ns, self.data, self.trace, skin))
+
     def to_dict(self) -> dict[str, Any]:
         """The export/JSON Lines form of the record."""
         return {"thing": self.thing, "seq": self.seq, "t_ns": self.t_ns,
@@ -102,3 +109,8 @@ class Record:
 
     def __repr__(self) -> str:
         return f"Record({self.thing!r}, seq={self.seq}, {self.name!r}, t_ns={self.t_ns})"
+
+
+def _revive(thing: str, seq: int, kind: int, name: str, t_ns: int, data: str,
+            trace: dict[str, int] | None, skin: tuple[bytes, bytes] | None) -> Record:
+    return Record(thing, seq, kind, name, t_ns, data, trace, None if skin is None else SkinArrays.from_wire(skin))
