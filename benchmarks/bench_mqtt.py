@@ -258,7 +258,7 @@ async def latency(broker: Mosquitto, tmp: Path, n_dev: int, seconds: float, imme
         for did in ids:
             await hub.add_driver(Driver(replace(base, id=did, title=did), frames, 120.0,
                                         phase_s=random.random() / 120))
-            hub.plane.stream(did).taps.append(Keep(did))
+            hub.plane.add_tap(did, Keep(did))
         await _connected(hub)
         sub = Subscriber(broker.port, f"wott/{hub.hub_id}/+/events/{EVENT}", expect=n_dev)
         await sub.expect("ready")

@@ -186,7 +186,7 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
             dev = await hub.add_driver(Driver(desc, frames, 120.0, phase_s=random.random() / 120))
             if precomputed:
                 replace_processing(dev, _lookup_processor(dev.processor, frames))
-        plane.stream(did).taps.append(Keep(did))
+        plane.add_tap(did, Keep(did))
 
     cpu: dict[str, tuple[float, float]] = {}  # client kind -> (hub, client) CPU, % of one core
 

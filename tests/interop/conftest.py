@@ -33,8 +33,8 @@ NODE_WOT = ("@node-wot/core", "@node-wot/binding-http")
 def demo_hub(tmp_path_factory, hub_thread):
     """A started HubThread (tests/conftest.py) serving the demo fleet on 127.0.0.1, free ports."""
     from wott_hub.config import HubConfig
-    from wott_hub.examples.demo import demo_devices
     from wott_hub.network import DiscoveryConfig
+    from wott_hub.plugins.demo import demo_devices
 
     db = tmp_path_factory.mktemp("interop") / "hub.db"
     cfg = HubConfig.demo_config(http_port=0, ws_port=0, database=str(db), history_batch_ms=20,

@@ -55,12 +55,6 @@ def wott_hub_demo_devices():
 
 
 @hookimpl
-def wott_hub_claim_service(service):
-    if service["type"] == "_echo._tcp.local.":
-        return DeviceConfig(service["name"].split(".")[0], "echo", {"n": int(service["properties"]["n"])})
-
-
-@hookimpl
 def wott_hub_claim_td(td):
     if td.get("title", "").startswith("echo"):
         return DeviceConfig(td["title"], "echo", {})
@@ -84,11 +78,6 @@ def wott_hub_open_device(config):  # no family check: the registry calls it for 
 @hookimpl
 def wott_hub_demo_devices():
     raise ValueError("demo exploded")
-
-
-@hookimpl
-def wott_hub_claim_service(service):
-    raise RuntimeError("claim_service exploded")
 
 
 @hookimpl

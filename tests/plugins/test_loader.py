@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import socket
 import subprocess
 import sys
 import tomllib
@@ -33,8 +32,8 @@ def test_a_plugin_that_raises_on_import_is_listed_and_the_others_load(fake_site)
     good = plugins["fakegood"]
     assert good.error is None and good.version == "1.0.0" and good.distribution == "wott-fake-good"
     assert good.families == ("echo",)
-    assert good.hooks == ("wott_hub_claim_service", "wott_hub_claim_td", "wott_hub_demo_devices",
-                          "wott_hub_families", "wott_hub_open_device")
+    assert good.hooks == ("wott_hub_claim_td", "wott_hub_demo_devices", "wott_hub_families",
+                          "wott_hub_open_device")
     assert plugins["builtin"].families == ("scene", "wot-remote") and plugins["builtin"].error is None
 
 
@@ -60,9 +59,6 @@ def test_a_hook_that_raises_is_recorded_and_the_other_plugins_still_answer(fake_
     registry = Registry()
     # demo_devices: fakehook raises, fakeresult returns garbage, fakegood answers.
     assert registry.demo_devices() == [DeviceConfig("echo-1", "echo", {"n": 2})]
-    service = {"name": "pad7._echo._tcp.local.", "type": "_echo._tcp.local.", "port": 9,
-               "addresses": ["127.0.0.1"], "properties": {b"n": b"5"}}
-    assert registry.claim(service) == DeviceConfig("pad7", "echo", {"n": 5})
     td = {"@context": ["https://www.w3.org/2022/wot/td/v1.1"], "title": "echo-td", "security": "nosec_sc"}
     assert registry.claim(td) == DeviceConfig("echo-td", "echo", {})
     assert registry.claim({**td, "title": "a thermostat"}) is None
@@ -70,7 +66,6 @@ def test_a_hook_that_raises_is_recorded_and_the_other_plugins_still_answer(fake_
         registry.open_device(DeviceConfig("cam", "flaky", {}))
     errors = by_name(registry)["fakehook"].error
     for text in ("wott_hub_demo_devices: raised ValueError: demo exploded",
-                 "wott_hub_claim_service: raised RuntimeError: claim_service exploded",
                  "wott_hub_claim_td: raised RuntimeError: claim_td exploded",
                  "wott_hub_open_device: raised KeyError: 'no such camera'"):
         assert text in errors
@@ -80,16 +75,6 @@ def test_a_hook_that_raises_is_recorded_and_the_other_plugins_still_answer(fake_
     # The same failure on every call is kept once.
     registry.demo_devices()
     assert by_name(registry)["fakehook"].error.count("demo exploded") == 1
-
-
-def test_claim_accepts_a_zeroconf_service_info(fake_site):
-    from zeroconf import ServiceInfo
-
-    info = ServiceInfo("_echo._tcp.local.", "pad9._echo._tcp.local.", port=8080, properties={"n": "4"},
-                       addresses=[socket.inet_aton("127.0.0.1")], server="pad9.local.")
-    assert Registry().claim(info) == DeviceConfig("pad9", "echo", {"n": 4})
-    with pytest.raises(TypeError):
-        Registry().claim(42)
 
 
 def test_open_device_validates_settings_naming_the_field_and_fills_defaults(fake_site):
@@ -157,8 +142,8 @@ def test_plugins_list_command_shows_failures_and_exits_cleanly(fake_site):
     assert listed["fakebroken"]["error"] == "RuntimeError: boom on import (wott_fake_broken.py:4)"
     assert listed["fakegood"] == {
         "name": "fakegood", "distribution": "wott-fake-good", "version": "1.0.0", "families": ["echo"],
-        "hooks": ["wott_hub_claim_service", "wott_hub_claim_td", "wott_hub_demo_devices",
-                  "wott_hub_families", "wott_hub_open_device"], "error": None}
+        "hooks": ["wott_hub_claim_td", "wott_hub_demo_devices", "wott_hub_families",
+                  "wott_hub_open_device"], "error": None}
     assert listed["taxel"]["families"] == ["taxel-array"] and listed["taxel"]["error"] is None
 
     from typer.testing import CliRunner

@@ -37,7 +37,7 @@ def _toml(v) -> str:
 
 def write_config(d, host: str, security: str) -> str:
     from wott_hub.examples import example_device
-    from wott_hub.examples.demo import _demo_steps
+    from wott_hub.plugins.demo import _demo_steps
 
     steps = _demo_steps(example_device("flat").mesh)
     (d / "hub.toml").write_text(f"""

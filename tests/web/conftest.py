@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from wott_hub.config import HubConfig
-from wott_hub.examples.demo import demo_devices
 from wott_hub.network import DirectoryConfig
+from wott_hub.plugins.demo import demo_devices
 
 CHROMIUM = os.environ.get("WOTT_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = [

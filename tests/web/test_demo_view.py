@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from wott_hub.examples import example_device
-from wott_hub.examples.demo import _demo_steps
+from wott_hub.plugins.demo import _demo_steps
 
 
 def camera_side() -> np.ndarray:

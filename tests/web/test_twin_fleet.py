@@ -6,7 +6,7 @@ from urllib.parse import quote
 
 import httpx
 
-from wott_hub.examples.demo import demo_devices
+from wott_hub.plugins.demo import demo_devices
 
 
 def test_fleet_page_lists_every_demo_device_from_the_directory(fleet, page, screenshot, wait):

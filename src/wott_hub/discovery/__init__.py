@@ -6,7 +6,8 @@ Hub wiring, in short::
     announcer = Announcer(zc)
     await announcer.announce_directory("wott-hub", port)             # TD at /.well-known/wot
     await announcer.announce_thing("barrel-1", port, "/things/barrel-1")
-    explorer = Explorer(on_found=..., on_updated=..., on_lost=..., own_ids=hub_thing_ids)
+    explorer = Explorer(on_found=..., on_updated=..., on_lost=..., claim=registry.claim,
+                        own_ids=hub_thing_ids)
     browser = Browser(zc, explorer.service_added, explorer.service_updated, explorer.service_removed,
                       ignore=lambda name: name in announcer.names)
     await browser.start()
@@ -14,10 +15,10 @@ Hub wiring, in short::
 
 from .announcer import Announcer, default_addresses, loopback_zeroconf
 from .browser import Browser
-from .explorer import Explorer, FoundThing, registry_claim, td_kind
+from .explorer import Claim, Explorer, FoundThing, td_kind
 from .records import DIRECTORY_SUBTYPE, WOT_TCP, ServiceRecord, instance_name, txt_record
 
 __all__ = [
-    "DIRECTORY_SUBTYPE", "WOT_TCP", "Announcer", "Browser", "Explorer", "FoundThing", "ServiceRecord",
-    "default_addresses", "instance_name", "loopback_zeroconf", "registry_claim", "td_kind", "txt_record",
+    "DIRECTORY_SUBTYPE", "WOT_TCP", "Announcer", "Browser", "Claim", "Explorer", "FoundThing",
+    "ServiceRecord", "default_addresses", "instance_name", "loopback_zeroconf", "td_kind", "txt_record",
 ]

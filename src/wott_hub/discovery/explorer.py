@@ -9,10 +9,10 @@ that leaves and comes back on another address, stays one Thing: ``on_found``
 once, then ``on_updated`` (new TD or address) and ``on_lost`` (gone from every
 introduction that announced it).
 
-Each new Thing goes through ``claim(td)`` (by default the plugin registry's
-``claim``, the hook that adapts foreign TDs): its ``DeviceConfig``, or None if
-no plugin adopts it, travels with the ``FoundThing``. The hub exposes claimed
-Things; the explorer itself opens nothing.
+Each new Thing goes through the ``claim(td)`` it is given (the hub gives the plugin
+registry's ``claim``, the hook that adapts foreign TDs; none: nothing is adopted): its
+``DeviceConfig``, or None if no plugin adopts it, travels with the ``FoundThing``. The
+hub exposes claimed Things; the explorer itself opens nothing and knows no plugin.
 """
 
 from __future__ import annotations
@@ -29,14 +29,14 @@ from urllib.parse import urljoin, urlsplit
 from tornado.httpclient import AsyncHTTPClient, HTTPClientError, HTTPRequest
 from wott_directory.client import DirectoryClient, ProblemError
 
+from wott_hub.td.media import TD_ACCEPT
+
 from .browser import _call
 from .records import ServiceRecord
 
-__all__ = ["Explorer", "FoundThing", "registry_claim", "td_kind"]
+__all__ = ["Claim", "Explorer", "FoundThing", "td_kind"]
 
 log = logging.getLogger("wott_hub.discovery")
-
-TD_ACCEPT = "application/td+json, application/json;q=0.9"  # also what wot-remote devices are asked
 
 
 def td_kind(td: dict[str, Any]) -> str:
@@ -49,13 +49,6 @@ def td_kind(td: dict[str, Any]) -> str:
     if "ThingLink" in names:
         return "Link"
     return "Thing"
-
-
-def registry_claim(td: dict[str, Any]) -> Any:
-    """The plugin registry's adoption of a foreign TD (``wott_hub_claim_td``), None if nobody adopts it."""
-    from wott_hub.plugins.registry import get_registry
-
-    return get_registry().claim(td)
 
 
 @dataclass
@@ -76,12 +69,14 @@ class FoundThing:
 
 
 Callback = Callable[[FoundThing], Any | Awaitable[Any]]
+Claim = Callable[[dict[str, Any]], Any]
+"""A foreign TD -> the ``DeviceConfig`` that adopts it, or None (the plugin registry's ``claim``)."""
 
 
 class Explorer:
     def __init__(self, on_found: Callback, on_updated: Callback | None = None,
                  on_lost: Callback | None = None,
-                 claim: Callable[[dict[str, Any]], Any] | None = registry_claim, timeout: float = 5.0,
+                 claim: Claim | None = None, timeout: float = 5.0,
                  own_ids: set[str] | None = None, follow_directories: bool = True,
                  directory_token: str | None = None) -> None:
         self.on_found = on_found

@@ -45,6 +45,7 @@ from wott_hub.tactile import (
     SkinShape,
     TactileFrame,
 )
+from wott_hub.td.media import TD_ACCEPT
 
 from .backoff import Backoff
 from .base import Driver, DriverError, Health, Retargetable
@@ -242,7 +243,6 @@ class RemoteWoTDriver(Driver, Retargetable):
                 if self.td is None:
                     # not at module level: discovery (zeroconf, the directory client) stays off the
                     # hub's start-up path
-                    from wott_hub.discovery.explorer import TD_ACCEPT
 
                     resp = await client.get(self.td_url, headers={"Accept": TD_ACCEPT})
                     resp.raise_for_status()

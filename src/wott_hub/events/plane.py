@@ -149,6 +149,11 @@ class EventPlane:
             for s in list(subs):
                 s.close()
 
+    def add_tap(self, thing: str, tap: Tap) -> None:
+        """Let ``tap`` observe every record of ``thing`` from now on, until the Thing's stream is removed:
+        the one way a binding (wotpy's bridge, the MQTT publisher) follows a Thing in process."""
+        self.stream(thing).taps.append(tap)
+
     def stream(self, thing: str) -> Stream:
         try:
             return self.streams[thing]
@@ -204,7 +209,7 @@ class EventPlane:
 
     def on_committed(self, watermarks: dict[str, int]) -> None:
         """History has written (or given up on) every record up to these seqs."""
-        failed_all = getattr(self.history_sink, "failed_seqs", None)
+        failed_all = self.history_sink.failed_seqs if self.history_sink is not None else None
         for thing, seq in watermarks.items():
             st = self.streams.get(thing)
             if st is None or seq <= st.committed:
@@ -260,7 +265,7 @@ class EventPlane:
         head = min(st.seq, st.committed) if self.hold and st.record else st.seq
         if after is not None and 0 <= after < head and st.record and self.history_source is not None:
             ring_first = st.ring[0].seq if st.ring else head + 1
-            failure = getattr(self.history_source, "failure", "")
+            failure = self.history_source.failure
             if after + 1 < ring_first and failure:
                 raise HistoryError(f"cannot resume {thing!r} after {after}: {failure}")
         sub = Subscriber(thing, interest, self.max_pending, self._unsubscribe)

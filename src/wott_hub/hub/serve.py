@@ -19,7 +19,7 @@ async def serve(config: HubConfig, *, ready: Callable[[Hub], None] | None = None
                 stop: asyncio.Event | None = None, extra_handlers: Sequence[tuple[Any, ...]] = ()) -> Hub:
     """Run a hub until SIGINT/SIGTERM (or ``stop``), then shut it down cleanly.
 
-    With ``demo`` and no devices configured, the demo fleet (``examples.demo.demo_devices``).
+    With ``demo`` and no devices configured, the demo fleet (``plugins.demo.demo_devices``).
     """
     stop = stop or asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -31,7 +31,7 @@ async def serve(config: HubConfig, *, ready: Callable[[Hub], None] | None = None
     if config.demo and not config.devices:
         from dataclasses import replace
 
-        from wott_hub.examples.demo import demo_devices
+        from wott_hub.plugins.demo import demo_devices
 
         config = replace(config, devices=tuple(demo_devices()))
     hub = Hub(config, extra_handlers=extra_handlers)

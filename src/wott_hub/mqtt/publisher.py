@@ -167,7 +167,7 @@ class MqttPublisher:
     # --- following the served Things -----------------------------------------------------
 
     def exposed(self, served: ServedThing) -> None:
-        self.plane.stream(served.id).taps.append(_Tap(self, served.id))
+        self.plane.add_tap(served.id, _Tap(self, served.id))
         topic = self.layout.td_topic(served.id)
         td = served.td_bytes()
         self.retained[topic] = (td, 1)

@@ -147,7 +147,7 @@ class HubDirectory:
         cfg, hub = self.cfg, self.hub
         # the hub's gate checks clients' scoped tokens (wott_hub.security) and hands the directory the
         # hub's own credential instead: the directory then declares and requires bearer for everything
-        credential = getattr(hub, "directory_credential", None)
+        credential = hub.directory_credential
         token, protect_reads = (credential, True) if credential else (cfg.token, cfg.protect_reads)
         open_writes = token is None and is_loopback(hub.host)
         if token is None and not open_writes:
@@ -161,7 +161,7 @@ class HubDirectory:
         engine = hub.engine
         directory = Directory(settings, engine if engine is not None else "sqlite://",
                               create_tables=engine is None,
-                              td_security=getattr(hub, "directory_td_security", None))
+                              td_security=hub.directory_td_security)
         try:
             await directory.start()
         except Exception:

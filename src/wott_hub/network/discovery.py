@@ -44,6 +44,15 @@ __all__ = ["HubDiscovery", "instance_label"]
 
 log = logging.getLogger("wott_hub.network")
 
+
+def _claim(td: dict[str, Any]) -> Any:
+    """The plugin registry's adoption of a foreign TD (``wott_hub_claim_td``), None if nobody adopts it:
+    the claim the hub gives its explorer (discovery itself knows no plugin)."""
+    from wott_hub.plugins.registry import get_registry
+
+    return get_registry().claim(td)
+
+
 def instance_label(text: str, limit: int = 63) -> str:
     """A DNS-SD instance name of at most ``limit`` UTF-8 bytes (RFC 6763 4.1.1); dots become '-'
     (python-zeroconf does not escape them)."""
@@ -114,7 +123,7 @@ class HubDiscovery:
             from wott_hub.discovery import Explorer
 
             self.explorer = Explorer(on_found=self._found, on_updated=self._updated, on_lost=self._lost,
-                                     own_ids=self.own_ids, follow_directories=cfg.browse)
+                                     claim=_claim, own_ids=self.own_ids, follow_directories=cfg.browse)
             if self.zc is not None and cfg.browse:
                 from wott_hub.discovery import Browser
 
@@ -246,15 +255,13 @@ class HubDiscovery:
     async def _updated(self, found: FoundThing) -> None:
         """A new TD or address of a Thing already found: re-target its device (same device id,
         same sequence for clients), or adopt it now if that had failed."""
-        from wott_hub.discovery import registry_claim
-
         if not self.started or not self._may_adopt(found):
             return
         device_id = self.adopted.get(found.id)
         dev = self.hub.device(device_id) if device_id is not None else None
         if dev is None:
             if found.config is None:
-                found.config = registry_claim(found.td)
+                found.config = _claim(found.td)
             if found.config is not None:
                 await self._adopt(found)
             return
@@ -268,7 +275,7 @@ class HubDiscovery:
                 return
             log.info("device %r (%s) moved to %s", device_id, found.id, found.url)
             return
-        new = registry_claim(found.td)  # a plugin's driver without retarget: open it again
+        new = _claim(found.td)  # a plugin's driver without retarget: open it again
         assert device_id is not None  # it has a device
         await self.hub.remove_device(device_id)
         self.adopted.pop(found.id, None)

@@ -67,6 +67,18 @@ class HubPort(Protocol):
     def http_url(self) -> str: ...
 
     @property
+    def directory_credential(self) -> str | None:
+        """The token the embedded directory requires of every client while the hub's gate checks
+        clients' scoped tokens (the gate hands it on for them); None when the hub runs open."""
+        ...
+
+    @property
+    def directory_td_security(self) -> dict[str, Any] | None:
+        """The security the embedded directory's own TD declares (``securityDefinitions``,
+        ``security``, ``streams``) when the hub's gate enforces tokens; None: the directory's own."""
+        ...
+
+    @property
     def http_port(self) -> int: ...
 
     @property

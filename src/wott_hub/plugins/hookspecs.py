@@ -73,19 +73,6 @@ def wott_hub_demo_devices() -> list[DeviceConfig]:
 
 
 @hookspec(firstresult=True)
-def wott_hub_claim_service(service: dict[str, Any]) -> DeviceConfig | None:
-    """Take over a device found by mDNS/DNS-SD.
-
-    Called by ``Registry.claim`` for each service the hub's discovery browser
-    finds, plugin by plugin until one claims it. ``service`` is a plain dict:
-    ``name``, ``type`` (e.g. ``_wot._tcp.local.``), ``server``, ``addresses``
-    (list of str), ``port`` (int) and ``properties`` (TXT record, str -> str).
-    Return a ``DeviceConfig`` that opens the device through one of this
-    plugin's families, or None to leave the service to other plugins.
-    """
-
-
-@hookspec(firstresult=True)
 def wott_hub_claim_td(td: dict[str, Any]) -> DeviceConfig | None:
     """Adopt a foreign Thing Description (a network device that speaks WoT itself).
 

@@ -309,16 +309,11 @@ class Registry:
                     out.append(cfg)
         return out
 
-    def claim(self, service_or_td: Any) -> DeviceConfig | None:
-        """The device config of the first plugin that claims a discovered service or foreign TD.
-
-        ``service_or_td`` is a TD (a mapping with ``@context``), an mDNS service
-        as a mapping, or a zeroconf ``ServiceInfo``.
-        """
-        kind, payload = _classify(service_or_td)
-        hook, arg = ("wott_hub_claim_td", "td") if kind == "td" else ("wott_hub_claim_service", "service")
+    def claim(self, td: Mapping[str, Any]) -> DeviceConfig | None:
+        """The device config of the first plugin that adopts a foreign TD (``wott_hub_claim_td``), or None."""
+        hook = "wott_hub_claim_td"
         families = self.families()
-        for name, result in self._call_each(hook, copy_args=True, **{arg: payload}):
+        for name, result in self._call_each(hook, copy_args=True, td=dict(td)):
             if result is None:
                 continue
             if not isinstance(result, DeviceConfig):
@@ -379,43 +374,6 @@ def _explain(cfg: DeviceConfig, error: Any) -> str:
             path += given[:1] or names[:1]
     where = f"setting {'.'.join(path)!r}" if path else "settings"
     return f"device {cfg.id!r} (family {cfg.family!r}): {where}: {message}"
-
-
-def _classify(obj: Any) -> tuple[str, dict[str, Any]]:
-    if isinstance(obj, Mapping):
-        if "@context" in obj or "securityDefinitions" in obj:
-            return "td", dict(obj)
-        return "service", _service_dict(obj)
-    if hasattr(obj, "port") and hasattr(obj, "properties") and hasattr(obj, "type"):
-        addresses = obj.parsed_addresses() if hasattr(obj, "parsed_addresses") else []
-        return "service", _service_dict({
-            "name": obj.name, "type": obj.type, "server": getattr(obj, "server", None),
-            "addresses": addresses, "port": obj.port, "properties": obj.properties,
-        })
-    raise TypeError(f"cannot claim a {type(obj).__name__}: expected a TD, a service dict or a ServiceInfo")
-
-
-def _text(v: Any) -> str:
-    if isinstance(v, bytes | bytearray):
-        return bytes(v).decode("utf-8", errors="replace")
-    return "" if v is None else str(v)
-
-
-_SERVICE_KEYS = ("name", "type", "server", "addresses", "port", "properties")
-
-
-def _service_dict(raw: Mapping[str, Any]) -> dict[str, Any]:
-    """mDNS services as plugins see them: plain str/int/list values, TXT decoded."""
-    props = raw.get("properties") or {}
-    return {
-        **{k: v for k, v in raw.items() if k not in _SERVICE_KEYS},
-        "name": _text(raw.get("name")),
-        "type": _text(raw.get("type")),
-        "server": _text(raw.get("server")) or None,
-        "addresses": [_text(a) for a in raw.get("addresses") or []],
-        "port": int(raw["port"]) if raw.get("port") is not None else None,
-        "properties": {_text(k): _text(v) for k, v in dict(props).items()},
-    }
 
 
 def _core_version() -> str | None:

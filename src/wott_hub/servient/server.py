@@ -173,7 +173,7 @@ class HubServer:
             raise
         self.servient.enable_exposed_thing(thing.title)
         served.exposed = exposed
-        self.plane.stream(served.id).taps.append(_WotpyBridge(exposed))
+        self.plane.add_tap(served.id, _WotpyBridge(exposed))
         for listener in self.on_expose:
             listener(served)
         return exposed

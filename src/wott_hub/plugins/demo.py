@@ -6,7 +6,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import example_device
+from wott_hub.examples import example_device
+
+from .model import DeviceConfig
+from .registry import get_registry
 
 if TYPE_CHECKING:
     from wott_hub.tactile import SkinMesh
@@ -14,15 +17,13 @@ if TYPE_CHECKING:
 __all__ = ["demo_devices"]
 
 
-def demo_devices() -> list[Any]:
+def demo_devices() -> list[DeviceConfig]:
     """The demo fleet: each installed plugin's simulated devices (``wott_hub_demo_devices``).
 
     With no plugin contributing any, the built-in ``scene`` family plays a
     looping scene (press, slide, tap, pinch) on each example skin, so
     ``wott-hub run`` always shows live devices.
     """
-    from wott_hub.plugins import DeviceConfig, get_registry
-
     found = get_registry().demo_devices()
     if found:
         return found

@@ -1,0 +1,47 @@
+"""One test per hook, named ``test_hook_<hook>`` (datasette's convention, checked by test_docs.py): each
+calls the hook through the registry on the plugins that really implement it, first-party ones included."""
+
+from __future__ import annotations
+
+import pytest
+
+from wott_hub.examples import example_device
+from wott_hub.plugins import DeviceConfig, Registry
+from wott_hub.tactile import DeviceDescription
+from wott_hub.td.builder import build_tactile_td
+
+
+@pytest.fixture(scope="module")
+def registry() -> Registry:
+    return Registry(only=["builtin", "taxel", "barrel", "flatpad"])
+
+
+def test_hook_wott_hub_families(registry):
+    families = registry.families()
+    assert {f: i.plugin for f, i in families.items()} == {
+        "scene": "builtin", "wot-remote": "builtin", "taxel-array": "taxel", "barrel-vision": "barrel",
+        "flat-vision": "flatpad"}
+    taxel = families["taxel-array"].schema  # the model's JSON Schema, derived by the registry
+    assert taxel["type"] == "object" and {"port", "rows", "cols"} <= set(taxel["properties"])
+
+
+def test_hook_wott_hub_open_device(registry):
+    config = DeviceConfig("t", "taxel-array", {"port": "/dev/null", "rows": 4, "cols": 6})
+    driver = registry.open_device(config)  # not started: nothing is opened until frames()
+    assert isinstance(driver.description, DeviceDescription)
+    assert driver.description.mesh.n_nodes == 4 * 6
+
+
+def test_hook_wott_hub_demo_devices(registry):
+    demo = registry.demo_devices()
+    families = registry.families()
+    assert {d.family for d in demo} == {"taxel-array", "barrel-vision", "flat-vision"}
+    assert all(families[d.family].plugin != "builtin" for d in demo)
+    assert len({d.id for d in demo}) == len(demo)
+
+
+def test_hook_wott_hub_claim_td(registry):
+    td = build_tactile_td(example_device("flat"), base="http://127.0.0.1:9/")
+    claimed = registry.claim(td)
+    assert claimed is not None and claimed.family == "wot-remote" and claimed.settings["td"]["id"] == td["id"]
+    assert registry.claim({"@context": "https://www.w3.org/2022/wot/td/v1.1", "title": "a lamp"}) is None
