@@ -113,4 +113,5 @@ class Record:
 
 def _revive(thing: str, seq: int, kind: int, name: str, t_ns: int, data: str,
             trace: dict[str, int] | None, skin: tuple[bytes, bytes] | None) -> Record:
-    return Record(thing, seq, kind, name, t_ns, data, trace, None if skin is None else SkinArrays.from_wire(skin))
+    return Record(thing, seq, kind, name, t_ns, data, trace,
+                  None if skin is None else SkinArrays.from_wire(skin))
