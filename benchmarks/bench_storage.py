@@ -48,7 +48,7 @@ def records(thing: str, frames: int, *, contacts: bool = True, seed: int = 7, ar
     import numpy as np
 
     from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, SkinArrays, encode
-    from wott_hub.hub import skin_deformed_json
+    from wott_hub.runtime.payloads import skin_deformed_json
     from wott_hub.tactile.processing import FrameResult
 
     rng = np.random.default_rng(seed)

@@ -1,10 +1,11 @@
-"""The import structure of ``src/wott_hub`` (docs/architecture.md): no cycles, and a hub package whose
-modules never import its top.
+"""The import structure of ``src/wott_hub`` (docs/architecture.md): no cycles, imports only along the
+layers, and a hub package whose modules never import its top.
 
 The graph is built from the modules' own source (``ast``), not by importing them: every
-runtime import counts, at module level or inside a function (a lazy import still ties the
-two modules together), and only those under ``if TYPE_CHECKING:`` do not. ``from x import y``
-is an edge to ``x.y`` when that is a module, else to ``x``.
+import counts, at module level, inside a function (a lazy import still ties the two modules
+together) or under ``if TYPE_CHECKING:`` (a module that needs another's types to be checked
+depends on it as much: hiding a cycle there is still a cycle). ``from x import y`` is an
+edge to ``x.y`` when that is a module, else to ``x``.
 """
 
 from __future__ import annotations
@@ -30,29 +31,9 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _is_type_checking(test: ast.expr) -> bool:
-    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
-
-
-def _runtime_imports(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
-    found: list[ast.Import | ast.ImportFrom] = []
-
-    def visit(node: ast.AST) -> None:
-        for child in ast.iter_child_nodes(node):
-            if isinstance(child, ast.If) and _is_type_checking(child.test):
-                for orelse in child.orelse:  # the else branch runs
-                    visit_one(orelse)
-                continue
-            visit_one(child)
-
-    def visit_one(node: ast.AST) -> None:
-        if isinstance(node, ast.Import | ast.ImportFrom):
-            found.append(node)
-        visit(node)
-
-    visit(tree)
-    return found
+def _imports(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
+    """Every import statement, wherever it is (``if TYPE_CHECKING:`` included)."""
+    return [node for node in ast.walk(tree) if isinstance(node, ast.Import | ast.ImportFrom)]
 
 
 def _targets(module: str, node: ast.Import | ast.ImportFrom) -> set[str]:
@@ -77,7 +58,7 @@ def import_graph() -> dict[str, set[str]]:
     for module, path in MODULES.items():
         tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
         edges = set()
-        for node in _runtime_imports(tree):
+        for node in _imports(tree):
             for target in _targets(module, node):
                 while target and target not in MODULES and target.startswith("wott_hub."):
                     target = target.rpartition(".")[0]  # a name inside a module
@@ -142,9 +123,10 @@ def _a_cycle(graph: dict[str, set[str]], component: list[str]) -> list[str]:
 def test_the_graph_sees_the_imports_it_must():
     graph = import_graph()
     assert "wott_hub.hub.lifecycle" in graph["wott_hub.hub"]  # relative, from a package
-    assert "wott_hub.hub.pipeline" in graph["wott_hub.hub.devices"]
-    assert "wott_hub.tactile.processing" in graph["wott_hub.hub.devices"]  # inside a function
-    assert "wott_hub.hub.lifecycle" not in graph["wott_hub.hub.status"]  # only under TYPE_CHECKING
+    assert "wott_hub.runtime.pipeline" in graph["wott_hub.runtime.worker"]
+    assert "wott_hub.tactile.processing" in graph["wott_hub.runtime.pipeline"]  # inside a function
+    assert "wott_hub.hub.lifecycle" not in graph["wott_hub.hub.status"]  # not imported at all
+    assert "wott_hub.hub.devices" in graph["wott_hub.hub.status"]  # only under TYPE_CHECKING: counts too
 
 
 def test_src_has_no_import_cycle():
@@ -159,18 +141,26 @@ def test_no_module_of_the_hub_package_imports_the_package_top():
     assert offenders == []
 
 
+def test_no_module_of_the_runtime_package_imports_the_package_top():
+    graph = import_graph()
+    offenders = sorted(m for m, edges in graph.items()
+                       if m.startswith("wott_hub.runtime.") and "wott_hub.runtime" in edges)
+    assert offenders == []
+
+
 # docs/architecture.md, "Direction of imports": a module imports only from its own layer or the
 # layers above it. Keys are the first name under wott_hub (a package or a top-level module).
 LAYERS: dict[str, int] = {
     "errors": 1, "tactile": 1,
-    "td": 2, "sim": 2, "events": 2, "configspec": 2, "examples": 2,
+    "td": 2, "sim": 2, "events": 2, "configspec": 2, "types": 2, "examples": 2,
     "drivers": 3,
     "plugins": 4,
     "discovery": 5,
-    "history": 6, "web": 6, "servient": 6, "security": 6, "mqtt": 6,
-    "network": 7, "config": 7, "config_docs": 7,
-    "hub": 8,
-    "cli": 9, "plugin_api": 9, "": 9,  # "": the package face, wott_hub/__init__.py
+    "runtime": 6,
+    "history": 7, "web": 7, "servient": 7, "security": 7, "mqtt": 7,
+    "network": 8, "config": 8, "config_docs": 8,
+    "hub": 9,
+    "cli": 10, "plugin_api": 10, "": 10,  # "": the package face, wott_hub/__init__.py
 }
 
 

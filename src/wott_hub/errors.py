@@ -25,6 +25,7 @@ __all__ = [
     "HistoryError",
     "InvalidInput",
     "NotFound",
+    "WorkerDied",
     "WottHubError",
     "exit_code",
     "http_status",
@@ -53,6 +54,12 @@ class Conflict(WottHubError):
 
 class DriverError(WottHubError):
     """A device cannot be opened or run at all (bad settings, model contract mismatch, no port)."""
+
+
+class WorkerDied(DriverError):
+    """A device's worker process (``[hub] workers``) exited: its devices stopped, and what was asked of
+    them there fails. A ``DriverError`` (422, exit 5): to whoever asked, the device cannot run now,
+    whichever process it ran in; the class says why, for a program that handles it apart."""
 
 
 class HistoryError(WottHubError):

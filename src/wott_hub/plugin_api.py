@@ -13,7 +13,8 @@ What is here, by the job it does in a plugin:
   a ``DriverError`` with the device and family);
 - the driver contract: ``Driver``, ``Health``, ``HealthStatus``, ``DriverError`` and
   the optional capabilities a driver may declare (``Retargetable``, ``Tareable``,
-  ``Recalibratable``); ``Backoff`` to reconnect a transport;
+  ``Recalibratable``, ``NoisyAtRest``, ``ReportsUnavailableNodes``); ``Backoff`` to
+  reconnect a transport;
 - settings: a family's settings as a ``SettingsModel`` (fields with ``Meta``
   bounds; ``settings_schema`` gives its JSON Schema, ``read_settings`` checks a
   table against it, ``SettingsTable`` the base of a nested table, ``model_fields``
@@ -39,7 +40,9 @@ from wott_hub.drivers.base import (
     DriverError,
     Health,
     HealthStatus,
+    NoisyAtRest,
     Recalibratable,
+    ReportsUnavailableNodes,
     Retargetable,
     Tareable,
 )
@@ -96,7 +99,9 @@ __all__ = [
     "Material",
     "MeshError",
     "Meta",
+    "NoisyAtRest",
     "Recalibratable",
+    "ReportsUnavailableNodes",
     "Retargetable",
     "Scene",
     "SceneError",

@@ -1,5 +1,5 @@
 """Recorded records as the hub writes them: skinDeformedDetection packets in the exact text of
-``hub.pipeline.skin_deformed_json`` (intensities rounded to µm), contactInformation changes, and
+``runtime.payloads.skin_deformed_json`` (intensities rounded to µm), contactInformation changes, and
 a Thing registered with a real Tactile TD and its static values (mesh)."""
 
 from __future__ import annotations

@@ -177,7 +177,7 @@ import pytest  # noqa: E402
 
 from wott_hub.events.record import SkinArrays  # noqa: E402
 from wott_hub.history.codec import decode_many, encode_records  # noqa: E402
-from wott_hub.hub import skin_deformed_json  # noqa: E402
+from wott_hub.runtime.payloads import skin_deformed_json  # noqa: E402
 from wott_hub.tactile.processing import FrameResult  # noqa: E402
 
 

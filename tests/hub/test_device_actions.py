@@ -143,15 +143,15 @@ def test_a_wotpy_client_invokes_tare_from_the_td(live):
 
 
 async def _open(family: str, settings: dict):
-    from wott_hub.hub.pipeline import open_driver
     from wott_hub.plugins import DeviceConfig
+    from wott_hub.runtime.opening import open_driver
 
     return await open_driver(DeviceConfig(f"{family}-x", family, settings))
 
 
 @pytest.mark.parametrize("family", ["flat-vision", "barrel-vision"])
 def test_vision_drivers_take_a_new_reference_on_tare_and_find_the_grid_again_on_recalibrate(family, run):
-    from wott_hub.hub.device_actions import action_names
+    from wott_hub.runtime.capabilities import action_names
     from wott_hub.td.builder import build_tactile_td
 
     async def main():

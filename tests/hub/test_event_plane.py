@@ -148,7 +148,7 @@ def test_the_hub_writes_skin_deformed_packets_exactly_as_the_processor_describes
 
     from wott_hub.events.record import encode
     from wott_hub.examples import example_device
-    from wott_hub.hub import skin_deformed_json
+    from wott_hub.runtime.payloads import skin_deformed_json
     from wott_hub.tactile import FrameProcessor, TactileFrame
     from wott_hub.tactile.indentation import Indenter, indent
 
@@ -161,15 +161,27 @@ def test_the_hub_writes_skin_deformed_packets_exactly_as_the_processor_describes
         assert skin_deformed_json(res) == encode(res.skin_deformed_detection())
 
 
+class _Sink:
+    """A record sink asking ``wants``; each record put lands in ``out`` as its fields
+    (thing, kind, name, t_ns, data, trace, skin)."""
+
+    def __init__(self, wants, out: list) -> None:
+        self.wants = wants
+        self.out = out
+
+    def put(self, rec) -> None:
+        self.out.append((rec.thing, rec.kind, rec.name, rec.t_ns, rec.data, rec.trace, rec.skin))
+
+
 def test_frame_records_builds_only_what_is_wanted_and_the_worker_builds_everything():
-    """The same rules in the hub (asks the plane) and in a worker (wants everything), hub/pipeline.py."""
+    """The same rules in the hub (asks the plane) and in a worker (wants everything), runtime/pipeline.py."""
     import json
 
     import numpy as np
 
     from wott_hub.examples import example_device
-    from wott_hub.hub.payloads import skin_deformed_json
-    from wott_hub.hub.pipeline import ACTION, CONTACTS, SKIN_DEFORMED, DevicePipeline
+    from wott_hub.runtime.payloads import skin_deformed_json
+    from wott_hub.runtime.pipeline import ACTION, CONTACTS, SKIN_DEFORMED, DevicePipeline
     from wott_hub.tactile import FrameProcessor, TactileFrame
     from wott_hub.tactile.indentation import Indenter, indent
 
@@ -192,9 +204,9 @@ def test_frame_records_builds_only_what_is_wanted_and_the_worker_builds_everythi
         return False
 
     for res in results:
-        all_state.records(res, 0, lambda *_: True, lambda *rec: everything.append(rec))
+        all_state.records(res, 0, _Sink(lambda *_: True, everything))
         everything.append("frame end")
-        none_state.records(res, 0, never, lambda *rec: nothing.append(rec))
+        none_state.records(res, 0, _Sink(never, nothing))
     by_frame = [[]]
     for rec in everything:
         if rec == "frame end":
@@ -219,7 +231,7 @@ def test_frame_records_stamps_the_skin_packet_when_tracing():
     import numpy as np
 
     from wott_hub.examples import example_device
-    from wott_hub.hub.pipeline import SKIN_DEFORMED, DevicePipeline
+    from wott_hub.runtime.pipeline import SKIN_DEFORMED, DevicePipeline
     from wott_hub.tactile import FrameProcessor, TactileFrame
     from wott_hub.tactile.indentation import Indenter, indent
 
@@ -228,7 +240,7 @@ def test_frame_records_stamps_the_skin_packet_when_tracing():
     d = indent(desc.mesh, [Indenter(centre, 1.3, 5.0, np.array([0.0, 0.0, 0.0]))])
     res = FrameProcessor(desc.mesh).process(TactileFrame(1, d))
     out = []
-    DevicePipeline("p", None, None).records(res, 123, lambda *_: True, lambda *rec: out.append(rec))
+    DevicePipeline("p", None, None).records(res, 123, _Sink(lambda *_: True, out))
     traces = {rec[2]: rec[5] for rec in out}
     assert set(traces[SKIN_DEFORMED]) == {"in", "proc", "enc"} and traces[SKIN_DEFORMED]["in"] == 123
     assert all(trace is None for name, trace in traces.items() if name != SKIN_DEFORMED)

@@ -1,4 +1,4 @@
-"""The hub's hand-written record texts are exactly ``encode`` of the payloads (hub/payloads.py)."""
+"""The hub's hand-written record texts are exactly ``encode`` of the payloads (runtime/payloads.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 from wott_hub.events.record import encode
 from wott_hub.examples import example_device
-from wott_hub.hub.payloads import contacts_json, skin_deformed_json
+from wott_hub.runtime.payloads import contacts_json, skin_deformed_json
 from wott_hub.tactile import FrameProcessor, TactileFrame
 from wott_hub.tactile.indentation import Indenter, indent
 

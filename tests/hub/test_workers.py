@@ -10,8 +10,9 @@ import time
 import httpx
 
 from wott_hub.config import HubConfig
-from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, SkinArrays
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, SkinArrays
 from wott_hub.plugins import DeviceConfig
+from wott_hub.runtime.messages import Ended
 from wott_hub.td.validate import validate_td
 
 
@@ -54,22 +55,33 @@ def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path,
 
 # --- the pipe: records batched in the worker (Outbox), unpacked by the hub (WorkerPool) ----------------
 
+END = Ended("-", "end")
+"""A message after the records: the tests' end marker."""
+
 def _skin_record(sink, t_ns: int, ids: list[int], mm: list[float]) -> None:
     import numpy as np
 
     data = json.dumps({"timeStamp": t_ns, "numOfDeformedNodes": len(ids), "arrayOfDeformedNodes": [
         {"deformedNodeID": i, "deformedNodeIntensity": v} for i, v in zip(ids, mm, strict=True)]},
         separators=(",", ":"))
-    sink.publish(sink.thing, KIND_EVENT, "skinDeformedDetection", t_ns, data, None,
-                 SkinArrays(np.array(ids, np.intp), np.array(mm)))
+    sink.put(Record(sink.thing, 0, KIND_EVENT, "skinDeformedDetection", t_ns, data, None,
+                    SkinArrays(np.array(ids, np.intp), np.array(mm))))
+
+
+def _fields(rec: Record) -> tuple:
+    """A record as it crossed the pipe: (kind, name, t_ns, data, trace, skin)."""
+    return rec.kind, rec.name, rec.t_ns, rec.data, rec.trace, rec.skin
 
 
 def _through_the_pipe(work, flush_s: float = 0.05):
     """Run ``work(outbox, sinks)`` in a loop whose pipe ends in a ``WorkerPool`` reader: the messages
-    the hub's loop hands on, the number of pipe messages they came in, each batch's frame times."""
+    the hub's loop hands on (``("recs", thing, records)`` per frame; ``END`` as ``("end",)``), the number
+    of pipe messages they came in, each batch's frame times."""
     import multiprocessing as mp
 
-    from wott_hub.hub.workers import Outbox, PipeSink, WorkerPool
+    from wott_hub.runtime.messages import Batch
+    from wott_hub.runtime.outbox import Outbox, PipeSink
+    from wott_hub.runtime.pool import WorkerPool
 
     got: list[tuple] = []
     batches: list[list[int]] = []  # the t_ns of each batch's frames
@@ -83,13 +95,22 @@ def _through_the_pipe(work, flush_s: float = 0.05):
 
         def send(self, msg) -> None:
             sent[0] += 1
-            if msg[0] == "recs":
-                batches.append([recs[0][2] for _, recs in msg[1]])
+            if isinstance(msg, Batch):
+                batches.append([recs[0].t_ns for recs in msg.frames])
             self.conn.send(msg)
+
+    class Heard:
+        """The hub's side (``WorkerEvents``): what the pool hands on."""
+
+        def on_records(self, recs) -> None:
+            got.append(("recs", recs[0].thing, [_fields(r) for r in recs]))
+
+        def on_ended(self, device_id, reason) -> None:
+            got.append((reason,))  # END
 
     async def main() -> None:
         hub_end, worker_end = mp.Pipe(duplex=True)
-        pool = WorkerPool(0, got.append)  # no process: this test's pipe stands for its worker
+        pool = WorkerPool(0, Heard())  # no process: this test's pipe stands for its worker
         pool.conns.append(hub_end)
         loop = asyncio.get_running_loop()
         loop.add_reader(hub_end.fileno(), pool._readable, 0)
@@ -112,9 +133,10 @@ def test_frames_of_all_devices_go_out_as_one_message_and_keep_their_order_and_ar
         for k in range(6):
             sink = sinks["ab"[k % 2]]
             _skin_record(sink, 1000 + k, [3, 7 + k], [0.5, 1.25])
-            sink.publish(sink.thing, KIND_PROPERTY, "contactInformation", 1000 + k, f'{{"k":{k}}}', {"in": k})
+            sink.put(Record(sink.thing, 0, KIND_PROPERTY, "contactInformation", 1000 + k, f'{{"k":{k}}}',
+                            {"in": k}))
             sink.frame_done()
-        outbox.send(("end",))
+        outbox.send(END)
 
     got, messages, _ = _through_the_pipe(work)
     assert messages == 2  # six frames in one batch, flushed ahead of "end"
@@ -135,10 +157,10 @@ def test_a_batch_waits_at_most_flush_s_even_while_the_loop_is_busy():
         sink = sinks["a"]
         t0 = time.monotonic()
         while time.monotonic() - t0 < 0.1:  # never yields: a loop tick running many devices
-            sink.publish("a", KIND_PROPERTY, "contactInformation", time.monotonic_ns(), "{}")
+            sink.put(Record("a", 0, KIND_PROPERTY, "contactInformation", time.monotonic_ns(), "{}"))
             sink.frame_done()
             time.sleep(0.001)
-        outbox.send(("end",))
+        outbox.send(END)
 
     got, messages, batches = _through_the_pipe(work, flush_s)
     assert len(got) - 1 == sum(map(len, batches)) and len(batches) >= 4
@@ -150,13 +172,13 @@ def test_a_batch_waits_at_most_flush_s_even_while_the_loop_is_busy():
 def test_a_lone_frame_goes_out_on_the_next_loop_tick_not_after_flush_s():
     async def work(outbox, sinks):
         sink = sinks["b"]
-        sink.publish("b", KIND_PROPERTY, "contactInformation", 1, "{}")
+        sink.put(Record("b", 0, KIND_PROPERTY, "contactInformation", 1, "{}"))
         sink.frame_done()
         t0 = time.monotonic()
         while outbox._frames:
             await asyncio.sleep(0)
         assert time.monotonic() - t0 < 0.5  # flush_s here is 5 s
-        outbox.send(("end",))
+        outbox.send(END)
 
     got, messages, _ = _through_the_pipe(work, flush_s=5.0)
     assert messages == 2

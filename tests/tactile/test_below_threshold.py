@@ -10,8 +10,8 @@ import asyncio
 
 import numpy as np
 
-from wott_hub.hub.pipeline import DevicePipeline
 from wott_hub.plugins import DeviceConfig, get_registry
+from wott_hub.runtime.pipeline import DevicePipeline
 from wott_hub.tactile.processing import FrameProcessor, ProcessingParams, processing_params
 
 SCENE = """
@@ -38,7 +38,7 @@ def test_a_kelvin_voigt_press_below_epsilon_is_explained_in_the_health(tmp_path)
     driver = get_registry().open_device(cfg)
     desc = driver.description
     pipeline = DevicePipeline("kv", driver, FrameProcessor(desc.mesh, processing_params(desc)))
-    pipeline.state = "running"
+    pipeline.started()
 
     async def play():
         out = []

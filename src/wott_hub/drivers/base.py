@@ -10,9 +10,9 @@ transient fault. The hub stops a driver by ``close()``.
 The contract is explicit: what every driver has is on ``Driver`` (``prepare``
 included, with a default that does nothing, so the hub always awaits it); a
 capability only some drivers have is a ``runtime_checkable`` protocol here
-(``Retargetable``), declared by the driver class inheriting it and tested by
-the hub with ``isinstance``, never found by ``getattr`` probing: so a
-capability has one name, one signature and one place that documents it.
+(``Retargetable``, ``Tareable``, ``NoisyAtRest``...), declared by the driver class
+inheriting it and tested by the hub with ``isinstance``, never found by ``getattr``
+probing: so a capability has one name, one signature and one place that documents it.
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ from typing import Any, Protocol, runtime_checkable
 from wott_hub.errors import DriverError
 from wott_hub.tactile import DeviceDescription, TactileFrame
 
-__all__ = ["Driver", "DriverError", "Health", "HealthStatus", "Recalibratable", "Retargetable", "Tareable"]
+__all__ = ["Driver", "DriverError", "Health", "HealthStatus", "NoisyAtRest", "Recalibratable",
+           "ReportsUnavailableNodes", "Retargetable", "Tareable"]
 
 
 class Health(StrEnum):
@@ -122,3 +123,30 @@ class Recalibratable(Protocol):
 
     def recalibrate(self) -> str:
         """Redo the calibration from the next frame (the skin at rest)."""
+
+
+@runtime_checkable
+class NoisyAtRest(Protocol):
+    """A driver whose readings at rest are noisy (the camera skins): its floor for the below-threshold note.
+
+    The device's processor notes in the health a press that stays between
+    ``below_threshold_floor`` x ε and ε for ``below_threshold_s`` seconds (0: never),
+    instead of the default floor a quiet sensor has (docs/processing.md). Read when the
+    hub makes the device's processor, at open and on a restart.
+    """
+
+    below_threshold_floor: float
+    below_threshold_s: float
+
+
+@runtime_checkable
+class ReportsUnavailableNodes(Protocol):
+    """A skin some of whose nodes can have no known value (a vision skin's markers missing, merged or
+    occluded at rest): served as the observable ``unavailableNodes`` property.
+
+    ``unavailable_nodes`` holds the ids of the nodes unknown now (ascending). The hub
+    reads it after every frame and compares it only when it is another object: a
+    driver assigns a new list when the set changes and never changes a list in place.
+    """
+
+    unavailable_nodes: list[int]

@@ -169,10 +169,18 @@ class EventPlane:
 
     def publish(self, thing: str, kind: int, name: str, t_ns: int, data: str,
                 trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> Record:
-        st = self.streams[thing]
+        """Make the record of these fields and ``put`` it: the next of ``thing``'s sequence."""
+        rec = Record(thing, 0, kind, name, t_ns, data, trace, skin)
+        self.put(rec)
+        return rec
+
+    def put(self, rec: Record) -> None:
+        """Number ``rec`` (made elsewhere, ``seq`` 0: a device pipeline's, here or from a worker's pipe)
+        and hand it on: ring, history, subscribers. The plane is the hub's ``types.RecordSink``."""
+        st = self.streams[rec.thing]
         st.seq += 1
-        rec = Record(thing, st.seq, kind, name, t_ns, data, trace, skin)
-        st.counts[name] += 1
+        rec.seq = st.seq
+        st.counts[rec.name] += 1
         ring = st.ring
         ring.append(rec)
         if len(ring) > self.ring_size:
@@ -184,11 +192,10 @@ class EventPlane:
                 if len(st.held) > self.max_held:
                     st.held.popleft()
                     self.held_overflow += 1
-                return rec
+                return
         elif not st.record:
             st.committed = rec.seq
         self._deliver(st, rec)
-        return rec
 
     @staticmethod
     def _deliver(st: Stream, rec: Record) -> None:

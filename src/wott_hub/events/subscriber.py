@@ -20,16 +20,15 @@ import asyncio
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 
+from wott_hub.types import Direct
+
 from .bucket import Bucket
 from .record import Record
 
-__all__ = ["DIRECT_BURST", "DIRECT_RATE", "Direct", "Interest", "Subscriber"]
+__all__ = ["DIRECT_BURST", "DIRECT_RATE", "Interest", "Subscriber"]
 
 Interest = tuple[int, str | None]
 """(kind, name): name None means every affordance of that kind."""
-
-Direct = Callable[[Record], bool]
-"""A consumer's writer of one record, called by ``push``: True if written, False to queue it."""
 
 DIRECT_RATE = 1000.0
 DIRECT_BURST = 8.0

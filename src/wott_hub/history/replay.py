@@ -17,22 +17,17 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from itertools import islice, repeat
 from typing import Any
 
 from wott_hub.errors import InvalidInput
+from wott_hub.types import Emit, EmitFrom
 
 from .merge import Row, merged_pages, resolve_range
 from .reader import Columns, HistoryReader
 
 __all__ = ["Replayer"]
-
-Emit = Callable[[int, str, int, str], None]
-"""emit(kind, name, t_ns, data)"""
-
-EmitFrom = Callable[[str, int, str, int, str], None]
-"""emit(thing, kind, name, t_ns, data): the Thing the record was recorded for comes first"""
 
 
 class Replayer:

@@ -6,10 +6,7 @@ its modules are internal and never import this one (tests/test_architecture.py).
 
 from .devices import DeviceRuntime
 from .lifecycle import Hub
-from .payloads import skin_deformed_json
-from .pipeline import DevicePipeline, RecordSink
 from .replay import ReplayRuntime
 from .serve import serve
 
-__all__ = ["DevicePipeline", "DeviceRuntime", "Hub", "RecordSink", "ReplayRuntime", "serve",
-           "skin_deformed_json"]
+__all__ = ["DeviceRuntime", "Hub", "ReplayRuntime", "serve"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import copy
 import json
-from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
+from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -21,14 +21,13 @@ import tornado.web
 from wott_hub.errors import InvalidInput, WottHubError, http_status
 from wott_hub.servient import HUB_THING_ID
 from wott_hub.servient.http import BaseHandler
+from wott_hub.types import Invoke
 
 if TYPE_CHECKING:
     from wott_hub.servient.server import HubServer
 
-__all__ = ["ActionHandler", "Invoke", "Stream", "Table", "install"]
+__all__ = ["ActionHandler", "Stream", "Table", "install"]
 
-Invoke = Callable[..., Awaitable[Any]]
-"""``invoke(input, **route_groups)``: the action's output, or a ``Stream``."""
 Table = Mapping[str, tuple[dict[str, Any], Invoke]]
 """An action's name -> its affordance and its ``Invoke``."""
 

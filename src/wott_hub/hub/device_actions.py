@@ -1,16 +1,16 @@
 """Device actions (``tare``, ``restart``, ``recalibrate``), invoked by any WoT client over HTTP.
 
-Each device TD declares the actions its driver can do (``action_names``, from
-the capabilities in ``wott_hub.drivers.base``; ``wott_hub.td.actions`` has their
+Each device TD declares the actions its driver can do (``runtime.capabilities.action_names``,
+from the capabilities in ``wott_hub.drivers.base``; ``wott_hub.td.actions`` has their
 schemas); ``POST /wot/<device>/actions/<name>`` performs one. The hub Thing's
 ``restartDevice`` action (management.py) goes through ``DeviceActions.invoke`` too.
 
-Contract of ``restart``: the served Thing is kept, and with it its event
-stream, its sequence numbers and every subscriber; only the driver is closed
-and opened again through the plugin registry (from the ``DeviceConfig`` it was
-opened from), with a new ``FrameProcessor``. If the new open fails, the device
-stays served as ``failed`` with the reason and is retried with the pipeline's
-backoff (``pipeline.restart_backoff``) until it opens, is removed or the hub stops.
+Contract of ``restart`` (``wott_hub.runtime.restart``, the same in a worker process):
+the served Thing is kept, and with it its event stream, its sequence numbers and every
+subscriber; only the driver is closed and opened again through the plugin registry (from
+the ``DeviceConfig`` it was opened from), with a new ``FrameProcessor``. If the new open
+fails, the device stays served as ``failed`` with the reason and is retried with the
+restart backoff until it opens, is removed or the hub stops.
 
 Every invocation is recorded: a ``deviceAction`` event on the device's own stream
 (history keeps it with the device's records, subscribers see it in order with
@@ -21,58 +21,34 @@ pipeline's guard: a plugin that raises fails that action (422), nothing else.
 
 A device in a worker process (``[hub] workers``) declares the same actions: its
 worker reports its driver's capabilities when it opens it, and the hub sends
-each invocation over the pipe and awaits the answer (workers.py has the
-protocol, the timeouts, and the restart done there); recording, counters and
+each invocation over the pipe and awaits the answer (``runtime.pool`` has the
+timeouts, ``runtime.worker`` the actions done there); recording, counters and
 errors are the in-process ones, here.
 """
 
 from __future__ import annotations
 
-import asyncio
-import logging
 import re
 import time
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any
 
-from wott_hub.errors import Conflict, DriverError, NotFound, WottHubError
+from wott_hub.errors import Conflict, NotFound, WottHubError
 from wott_hub.events.record import KIND_EVENT, encode
+from wott_hub.runtime.restart import Restarts
 from wott_hub.servient import HUB_THING_ID
-from wott_hub.td.actions import ALWAYS
 
 from .actions import ActionHandler
-from .pipeline import driver_capabilities, open_driver, restart_backoff
-from .tasks import TasksById
 
 if TYPE_CHECKING:
-    from wott_hub.drivers.base import Driver
     from wott_hub.events.plane import EventPlane
 
     from .devices import DeviceRuntime, Devices
-    from .workers import WorkerDevice
 
-__all__ = ["DEVICE_ACTION", "DeviceActions", "action_names"]
-
-log = logging.getLogger("wott_hub.hub")
+__all__ = ["DEVICE_ACTION", "DeviceActions"]
 
 DEVICE_ACTION = "deviceAction"
 """The event each invocation publishes on the device's stream (declared in every device TD)."""
-
-
-def action_names(driver: Driver | WorkerDevice, *, reopenable: bool,
-                 capabilities: tuple[str, ...] | None = None) -> tuple[str, ...]:
-    """The actions a device with ``driver`` declares: ``tare``/``recalibrate`` where the driver has the
-    capability (``capabilities``: as a worker process reported them for its driver), ``restart`` when
-    the hub can open it again (``reopenable``: it was opened from a configuration)."""
-    caps = driver_capabilities(driver) if capabilities is None else capabilities
-    names = []
-    if "tare" in caps:
-        names.append("tare")
-    if reopenable:
-        names.extend(ALWAYS)
-    if "recalibrate" in caps:
-        names.append("recalibrate")
-    return tuple(names)
 
 
 def _iso(t_ns: int) -> str:
@@ -85,8 +61,7 @@ class DeviceActions:
     def __init__(self, devices: Devices, plane: EventPlane) -> None:
         self.devices = devices
         self.plane = plane
-        self.reopening = TasksById("reopen")  # device id -> its re-open retry loop
-        self._restarting: set[str] = set()
+        self.restarts = Restarts(devices)  # restarts of devices in this process, and their retries
 
     def declared(self, dev: DeviceRuntime) -> list[str]:
         return list((dev.thing.td.get("actions") or {}).keys())
@@ -136,7 +111,7 @@ class DeviceActions:
         assert dev.worker is not None
         detail, error, report = await dev.worker.act(name)
         if report is not None and self.devices.running.get(dev.id) is dev:
-            dev.pipeline.remote_health(*report)
+            dev.pipeline.remote_health(report)
         if error is not None:
             raise error
         return detail
@@ -157,73 +132,17 @@ class DeviceActions:
         """Close the driver and open it again; the Thing, its stream and its sequence stay."""
         if dev.config is None:
             raise Conflict(f"device {dev.id!r} cannot be reopened by the hub")
-        if dev.id in self._restarting:
-            raise Conflict(f"device {dev.id!r} is being restarted already")
-        self._restarting.add(dev.id)
-        try:
-            if dev.worker is not None:  # its worker closes, opens and retries it (workers.py)
-                dev.pipeline.state, dev.pipeline.reason = "starting", "restarting on request"
-                return await self._remote(dev, "restart")
-            self.cancel_reopen(dev.id)
-            await self._stop_pipeline(dev)
-            dev.pipeline.restarts += 1
-            dev.pipeline.state, dev.pipeline.reason = "starting", "restarting on request"
-            try:
-                driver = await open_driver(dev.config)
-            except DriverError as e:
-                self._fail_and_retry(dev, str(e))
-                raise
-            self._resume(dev, driver)
-        finally:
-            self._restarting.discard(dev.id)
-        return "driver closed and opened again; the stream continues"
-
-    async def _stop_pipeline(self, dev: DeviceRuntime) -> None:
-        task, dev.task = dev.task, None
-        if task is not None:
-            task.cancel()
-        await dev.pipeline.close()
-        if task is not None:
-            await asyncio.gather(task, return_exceptions=True)
-
-    def _resume(self, dev: DeviceRuntime, driver: Driver) -> None:
-        """Run ``dev``'s pipeline on a freshly opened ``driver`` (same mesh: the served TD stays true)."""
-        dev.pipeline.reopened(driver)
-        self.devices._run(dev)
-
-    def _fail_and_retry(self, dev: DeviceRuntime, reason: str) -> None:
-        dev.pipeline.state, dev.pipeline.reason = "failed", reason
-        self.reopening.start(dev.id, self._reopen(dev, reason))
-
-    async def _reopen(self, dev: DeviceRuntime, reason: str) -> None:
-        """Open ``dev`` again with backoff until it opens (then it runs) or the task is cancelled."""
-        backoff = restart_backoff()
-        config = dev.config
-        assert config is not None  # restart refuses a device without one
-        while True:
-            delay = backoff.next_delay()
-            dev.pipeline.reason = f"{reason} (retry {backoff.attempts} in {delay:.1f} s)"
-            await asyncio.sleep(delay)
-            try:
-                driver = await open_driver(config)
-            except DriverError as e:
-                reason = str(e)
-                continue
-            if self.devices.running.get(dev.id) is not dev:  # removed meanwhile
-                await driver.close()
-                return
-            try:
-                self._resume(dev, driver)
-            except Conflict as e:
-                await dev.pipeline.close()
-                dev.pipeline.state, dev.pipeline.reason = "failed", str(e)
-            return
+        if dev.worker is None:
+            return await self.restarts.restart(dev.id, dev.pipeline, dev.config)
+        with self.restarts.one_at_a_time(dev.id):  # its worker closes, opens and retries it
+            dev.pipeline.restarting()
+            return await self._remote(dev, "restart")
 
     def cancel_reopen(self, device_id: str) -> None:
-        self.reopening.cancel(device_id)
+        self.restarts.cancel(device_id)
 
     async def stop(self) -> None:
-        await self.reopening.stop()
+        await self.restarts.stop()
 
     # --- HTTP -----------------------------------------------------------------------------------
 

@@ -1,10 +1,11 @@
 """The hub's devices: open each (here or in a worker process), serve it, run its pipeline.
 
 A device is a ``DeviceRuntime``: its served Thing and its ``DevicePipeline``
-(pipeline.py). Opened in-process, the pipeline runs here as a task and writes
-into the event plane; opened in a worker process (``[hub] workers``), the
-pipeline runs there (workers.py) and the hub keeps a pipeline without a
-processor, fed with the records, health and end the worker sends.
+(``wott_hub.runtime.pipeline``). Opened in-process, the pipeline runs here as a
+task and writes into the event plane; opened in a worker process (``[hub]
+workers``), the pipeline runs there (``wott_hub.runtime.worker``) and the hub
+keeps a pipeline without a processor, fed with the records, health and end the
+worker sends (``Devices`` hears them: ``runtime.pool.WorkerEvents``).
 """
 
 from __future__ import annotations
@@ -15,22 +16,25 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.errors import Conflict
+from wott_hub.runtime.capabilities import action_names
+from wott_hub.runtime.opening import open_driver
+from wott_hub.runtime.pipeline import CONTACTS, UNAVAILABLE, DevicePipeline
 from wott_hub.servient import ServedThing, clean_td
 from wott_hub.td.builder import build_tactile_td, static_property_values
-
-from .device_actions import action_names
-from .pipeline import CONTACTS, UNAVAILABLE, DevicePipeline, open_driver
 
 if TYPE_CHECKING:
     from wott_hub.config import HubConfig
     from wott_hub.drivers.base import Driver
     from wott_hub.events.plane import EventPlane
+    from wott_hub.events.record import Record
     from wott_hub.plugins.model import DeviceConfig
+    from wott_hub.runtime.handle import DeviceHandle
+    from wott_hub.runtime.pipeline import Report
+    from wott_hub.runtime.pool import WorkerDevice, WorkerPool
     from wott_hub.tactile import DeviceDescription, FrameProcessor
 
     from .recording import HubHistory
     from .things import Things
-    from .workers import WorkerDevice, WorkerPool
 
 __all__ = ["DeviceRuntime", "Devices"]
 
@@ -51,7 +55,7 @@ class DeviceRuntime:
     actions: dict[str, Any] = field(default_factory=dict)  # device actions' counters (device_actions.py)
 
     @property
-    def driver(self) -> Driver | WorkerDevice:
+    def driver(self) -> DeviceHandle:
         """The device's ``Driver``, or its ``WorkerDevice`` proxy."""
         return self.pipeline.driver
 
@@ -69,6 +73,9 @@ class DeviceRuntime:
 
 
 class Devices:
+    """The running devices, the configured ones that failed to open, the worker processes; the
+    ``runtime.restart.DeviceHost`` of the device actions' restarts."""
+
     def __init__(self, config: HubConfig, plane: EventPlane, things: Things, history: HubHistory) -> None:
         self.config = config
         self.plane = plane
@@ -86,9 +93,9 @@ class Devices:
 
         cfg = self.config
         if cfg.workers > 0 and cfg.devices:
-            from .workers import WorkerPool  # multiprocessing only when it is used
+            from wott_hub.runtime.pool import WorkerPool  # multiprocessing only when it is used
 
-            self.pool = WorkerPool(cfg.workers, self.on_worker_message, cfg.worker_nice)
+            self.pool = WorkerPool(cfg.workers, self, cfg.worker_nice)
         for dcfg in cfg.devices:
             try:
                 await self.add_device(dcfg, run=False)
@@ -122,12 +129,8 @@ class Devices:
                          config: DeviceConfig | None = None) -> DeviceRuntime:
         """Serve an open driver as a device Thing and (``run``) start its pipeline here; ``config``: the
         ``DeviceConfig`` it was opened from (its ``restart`` action opens it again from that)."""
-        from wott_hub.tactile import FrameProcessor
-        from wott_hub.tactile.processing import processing_params
-
         desc = driver.description
-        tid = device_id or desc.id
-        pipeline = DevicePipeline(tid, driver, FrameProcessor(desc.mesh, processing_params(desc)))
+        pipeline = DevicePipeline.of_driver(device_id or desc.id, driver)
         return await self._add(desc, pipeline, None, family=family, record=record, run=run, config=config)
 
     def _check_free(self, tid: str) -> None:
@@ -169,41 +172,23 @@ class Devices:
 
     def _run(self, dev: DeviceRuntime) -> None:
         if dev.worker is not None:  # its worker process runs it
-            dev.pipeline.state = "running"
+            dev.pipeline.started()
             dev.worker.run(self.plane.trace)
             return
         dev.task = asyncio.create_task(dev.pipeline.run(self.plane, trace=self.plane.trace),
                                        name=f"device:{dev.id}")
 
-    def on_worker_message(self, msg: tuple[Any, ...]) -> None:
-        """Records, health and ends of devices running in worker processes."""
-        kind = msg[0]
-        if kind == "recs":
-            dev = self.running.get(msg[1])
-            if dev is not None:
-                dev.pipeline.remote_records(msg[2], self.plane)
-        elif kind == "health":
-            for did, report in msg[1].items():
-                dev = self.running.get(did)
-                if dev is not None:
-                    dev.pipeline.remote_health(*report)
-        elif kind == "ended":
-            dev = self.running.get(msg[1])
-            if dev is not None:
-                dev.pipeline.state, dev.pipeline.reason = "ended", msg[2]
-        elif kind == "worker_exit" and self.live:
-            log.error("worker process %d exited; its devices stopped", msg[1])
-            for dev in self.running.values():
-                if dev.worker is not None and dev.worker.worker == msg[1]:
-                    dev.pipeline.state, dev.pipeline.reason = "failed", "its worker process exited"
+    async def _halt(self, dev: DeviceRuntime) -> None:
+        task, dev.task = dev.task, None
+        if task is not None:
+            task.cancel()
+        await dev.pipeline.close()
+        if task is not None:
+            await asyncio.gather(task, return_exceptions=True)
 
     async def remove(self, device_id: str) -> None:
         dev = self.running.pop(device_id)
-        if dev.task is not None:
-            dev.task.cancel()
-        await dev.pipeline.close()
-        if dev.task is not None:
-            await asyncio.gather(dev.task, return_exceptions=True)
+        await self._halt(dev)
         self.things.unserve(device_id)
 
     async def stop(self) -> None:
@@ -216,3 +201,41 @@ class Devices:
         await asyncio.gather(*tasks, return_exceptions=True)
         if self.pool is not None:
             await self.pool.close()
+
+    # --- runtime.restart.DeviceHost: a restart of a device in this process ------------------------
+
+    def is_current(self, device_id: str, pipeline: DevicePipeline) -> bool:
+        dev = self.running.get(device_id)
+        return dev is not None and dev.pipeline is pipeline
+
+    async def halt(self, device_id: str) -> None:
+        await self._halt(self.running[device_id])
+
+    def resume(self, device_id: str) -> None:
+        self._run(self.running[device_id])
+
+    # --- runtime.pool.WorkerEvents: devices running in worker processes -----------------------------
+
+    def on_records(self, recs: list[Record]) -> None:
+        dev = self.running.get(recs[0].thing)
+        if dev is not None:
+            dev.pipeline.remote_records(recs, self.plane)
+
+    def on_health(self, reports: dict[str, Report]) -> None:
+        for did, report in reports.items():
+            dev = self.running.get(did)
+            if dev is not None:
+                dev.pipeline.remote_health(report)
+
+    def on_ended(self, device_id: str, reason: str) -> None:
+        dev = self.running.get(device_id)
+        if dev is not None:
+            dev.pipeline.ended(reason)
+
+    def on_worker_exit(self, worker: int) -> None:
+        if not self.live:
+            return
+        log.error("worker process %d exited; its devices stopped", worker)
+        for dev in self.running.values():
+            if dev.worker is not None and dev.worker.worker == worker:
+                dev.pipeline.failed("its worker process exited")

@@ -16,8 +16,8 @@ devices, ends every stream, writes what is queued and closes. ``serve``
 (serve.py) wraps both with SIGINT/SIGTERM handling for ``wott-hub run``.
 
 ``Hub`` only wires and sequences its parts, each with one job: ``Things``
-(serving, things.py), ``HubHistory`` (recording.py), ``Devices`` (devices.py,
-pipelines in pipeline.py, worker processes in workers.py), ``Replays``
+(serving, things.py), ``HubHistory`` (recording.py), ``Devices`` (devices.py;
+pipelines and worker processes in ``wott_hub.runtime``), ``Replays``
 (replay.py), ``HubStatus`` (the hub Thing, status.py) and ``HubNetwork``
 (``wott_hub.network``, given a ``NetworkPort``).
 """
@@ -54,8 +54,7 @@ if TYPE_CHECKING:
     from wott_hub.history import HistoryReader, HistoryWriter
     from wott_hub.mqtt.publisher import MqttPublisher
     from wott_hub.plugins.model import DeviceConfig
-
-    from .workers import WorkerPool
+    from wott_hub.runtime.pool import WorkerPool
 
 __all__ = ["Hub"]
 

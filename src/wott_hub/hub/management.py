@@ -9,11 +9,12 @@ like for any Thing. ``restartDevice`` is the device's own ``restart`` action
 (device_actions.py).
 
 A configured device that fails to open at start (``failed`` in health, with
-its reason) is opened again with the pipeline's backoff (0.5 s doubling to
-30 s) until it opens, and is then served like the others (TD, directory, mDNS);
-its health reason says when the next attempt is. A device whose configuration
-can never open (unknown family, settings its family's schema refuses) is not
-retried: its reason says to fix the configuration.
+its reason) is opened again with the restart backoff (0.5 s doubling to
+30 s, ``runtime.opening.restart_backoff``) until it opens, and is then served
+like the others (TD, directory, mDNS); its health reason says when the next
+attempt is. A device whose configuration can never open (unknown family,
+settings its family's schema refuses) is not retried: its reason says to fix
+the configuration.
 
 Errors of ``addDevice``: input that is not a device table, an unknown family or
 bad settings → 400 naming the field (``InvalidInput``); an id already used → 409
@@ -29,11 +30,11 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.errors import Conflict, DriverError, InvalidInput, NotFound, WottHubError
+from wott_hub.runtime.opening import restart_backoff
+from wott_hub.runtime.tasks import TasksById
 from wott_hub.servient import HUB_THING_ID
 
 from .actions import install as install_actions
-from .pipeline import restart_backoff
-from .tasks import TasksById
 
 if TYPE_CHECKING:
     from wott_hub.config import HubConfig

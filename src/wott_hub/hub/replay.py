@@ -25,10 +25,10 @@ from typing import TYPE_CHECKING, Any
 from wott_hub.errors import Conflict, InvalidInput, NotFound, WottHubError
 from wott_hub.events.record import KIND_PROPERTY
 from wott_hub.history.times import parse_time
+from wott_hub.runtime.pipeline import CONTACTS, NO_CONTACTS, NO_UNAVAILABLE, UNAVAILABLE
 from wott_hub.servient import ServedThing, with_forms
 
 from .actions import install as install_actions
-from .pipeline import CONTACTS, NO_CONTACTS, NO_UNAVAILABLE, UNAVAILABLE
 
 if TYPE_CHECKING:
     from wott_hub.config import HubConfig

@@ -4,7 +4,7 @@ Its properties ``devices``, ``health`` and ``eventCounters`` are computed when
 read; a watcher publishes ``healthChange`` when a device's state changes (and
 the ``health`` property with it, when someone observes it). Nothing a plugin
 does can break them: a device's ``health()`` is read through its pipeline's
-guard (pipeline.py), and a watcher iteration that fails anyway is logged (once
+guard (``runtime.pipeline``), and a watcher iteration that fails anyway is logged (once
 per distinct failure) and the watcher carries on. ``health`` names the plugins
 that failed to load (``plugins.failed``), without degrading the hub for them. Its ``replay`` and
 ``stopReplay`` actions are declared and mounted by ``replay.Replays.install``.

@@ -9,9 +9,10 @@ from importlib import resources
 from typing import Any
 
 from wott_hub.tactile.device import DeviceDescription
+from wott_hub.types import FormFactory
 
 from .actions import declared_actions
-from .forms import FormFactory, FormLayout
+from .forms import FormLayout
 from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
 
 __all__ = ["build_tactile_td", "static_property_values", "tactile_context"]

@@ -29,21 +29,19 @@ show`` has the same forms as the one the hub serves.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import quote
 
 from slugify import slugify
 
+from wott_hub.types import FormFactory
+
 from .mqtt import MqttLayout
 
-__all__ = ["CONTEXT_PATH", "PREFIX", "FormFactory", "FormLayout"]
+__all__ = ["CONTEXT_PATH", "PREFIX", "FormLayout"]
 
 CONTEXT_PATH = "contexts/tactile-v1.jsonld"
-
-FormFactory = Callable[[str, str, dict[str, Any]], list[dict[str, Any]]]
-"""(kind 'property'|'event'|'action', affordance name, affordance) -> forms."""
 
 PREFIX = "/wot"
 JSON = "application/json"

@@ -25,8 +25,9 @@ Health, as the driver contract asks:
 Markers unavailable at rest (``unavailable_nodes``: missing, merged or occluded
 markers, their nodes read 0) and displacements clamped to the family's
 physical bound are reported in the health reason too (``_report_health``); the hub
-serves ``unavailable_nodes`` as the observable ``unavailableNodes`` property and gives
-its processor ``below_threshold_floor``/``below_threshold_s`` (docs/processing.md).
+serves ``unavailable_nodes`` as the observable ``unavailableNodes`` property
+(``ReportsUnavailableNodes``) and gives its processor
+``below_threshold_floor``/``below_threshold_s`` (``NoisyAtRest``, docs/processing.md).
 
 Time: a live camera's frames are stamped with the hub clock when read. A
 recorded source (a reader with ``recorded`` true: video files, image
@@ -56,7 +57,9 @@ from wott_hub.plugin_api import (
     DeviceDescription,
     Driver,
     Health,
+    NoisyAtRest,
     Recalibratable,
+    ReportsUnavailableNodes,
     TactileFrame,
     Tareable,
 )
@@ -94,7 +97,7 @@ class SourceEnded(Exception):
     """A finite simulated source played to its end: the device is done, not lost."""
 
 
-class CameraDriver(Driver, Tareable, Recalibratable):
+class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavailableNodes):
     """One camera-based skin: ``open_source()`` makes a reader, the estimator turns frames into D.
 
     A subclass names what its estimator raises while the frame shows no grid
@@ -108,7 +111,7 @@ class CameraDriver(Driver, Tareable, Recalibratable):
 
     reference_error: ClassVar[type[Exception]]
     rest_subject: ClassVar[str] = "skin"
-    below_threshold_floor: ClassVar[float] = BELOW_THRESHOLD_FLOOR  # the hub's processor uses it too
+    below_threshold_floor: float = BELOW_THRESHOLD_FLOOR  # the hub's processor uses it too (NoisyAtRest)
     source_name: str = "camera"
 
     def __init__(

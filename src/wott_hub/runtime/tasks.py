@@ -1,8 +1,9 @@
 """One background task per device id: the retry loops of devices that could not be opened.
 
-Both the device actions (a device whose ``restart`` could not re-open it) and fleet
-management (a configured device that failed to open at start) keep such a loop per
-device; a loop removes itself when it ends, and removing, restarting or stopping cancels it.
+Both the restarts (``restart.Restarts``: a device whose ``restart`` could not re-open it,
+in the hub's process or a worker's) and the hub's fleet management (a configured device
+that failed to open at start) keep such a loop per device; a loop removes itself when it
+ends, and removing, restarting or stopping cancels it.
 """
 
 from __future__ import annotations

@@ -2,49 +2,63 @@
 
 The hub and its worker processes run this same object and make the same
 records from a frame; they differ only in the sink a record goes to (the event
-plane in the hub, a pipe to the hub in a worker, ``workers.PipeSink``) and in
+plane in the hub, a pipe to the hub in a worker, ``outbox.PipeSink``) and in
 who wants it (the plane knows; a worker cannot, so its sink wants them all).
+A record is made once, as a ``Record`` not yet numbered, and handed to the sink
+(``types.RecordSink.put``): the plane numbers it, a pipe carries it as it is.
 
 A ``DevicePipeline`` owns what changes as frames flow: the contact state (the
 last contacts, encoded only when someone reads them) and the counters the hub
 reports (``state``, ``reason``, ``frames``, ``frame_errors``, ``restarts``).
+Others read those; only the pipeline changes them, through its transitions
+(``started``, ``ended``, ``failed``, ``restarting``, ``retrying``, ``reopened``,
+``remote_health``), so the states a device can be in are written in one place.
 For a device running in a worker process, the hub keeps a pipeline without a
-processor: its driver is the worker proxy and its contact state and counters
-are fed by the worker's messages (``remote_records``, ``remote_health``).
+processor: its driver is the worker's proxy (``handle.DeviceHandle``) and its
+contact state and counters are fed by the worker's messages (``remote_records``,
+``remote_health``).
 
-Every call into the driver (plugin code: ``open``/``prepare`` in ``open_driver``,
-``frames``, ``health``, ``close``) goes through the pipeline's
-``wott_hub.plugins.isolation.Guard``: whatever it raises marks this device only
-(``state``/``reason``, or ``degraded`` with ``"health() raised ..."``), is logged
-once with its traceback, and never reaches the hub Thing, the routes or a watcher.
+Every call into the driver (plugin code: ``frames``, ``health``, ``tare``,
+``recalibrate``, ``close``; opening is ``opening.open_driver``) goes through the
+pipeline's ``wott_hub.plugins.isolation.Guard``: whatever it raises marks this
+device only (``state``/``reason``, or ``degraded`` with ``"health() raised ..."``),
+is logged once with its traceback, and never reaches the hub Thing, the routes
+or a watcher.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import time
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, NamedTuple
 
-from wott_hub.drivers.backoff import Backoff
-from wott_hub.drivers.base import Driver, Health, HealthStatus, Recalibratable, Tareable
+from wott_hub.drivers.base import (
+    Driver,
+    Health,
+    HealthStatus,
+    NoisyAtRest,
+    Recalibratable,
+    ReportsUnavailableNodes,
+    Tareable,
+)
 from wott_hub.errors import Conflict, DriverError, NotFound
-from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, SkinArrays, encode
-from wott_hub.plugins.isolation import CAUGHT, Guard, attempt, attempt_async
-from wott_hub.tactile import DeviceDescription, FrameError, FrameProcessor, FrameResult
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, SkinArrays, encode
+from wott_hub.plugins.isolation import CAUGHT, Guard
+from wott_hub.tactile import FrameError, FrameProcessor, FrameResult
+from wott_hub.types import FrameSink
 
+from .opening import CLOSE_TIMEOUT_S, restart_backoff
 from .payloads import contacts_json, skin_deformed_json
 
 if TYPE_CHECKING:
-    from wott_hub.plugins.model import DeviceConfig
-    from wott_hub.plugins.registry import Registry
+    from wott_hub.types import RecordSink
 
-    from .workers import WorkerDevice
+    from .handle import DeviceHandle
 
-__all__ = ["ACTION", "CLOSE_TIMEOUT_S", "CONTACTS", "NO_CONTACTS", "NO_UNAVAILABLE", "SKIN_DEFORMED",
-           "UNAVAILABLE", "DevicePipeline", "RecordSink", "driver_capabilities", "open_driver",
-           "restart_backoff", "tune_processor"]
+__all__ = ["ACTION", "CONTACTS", "NO_CONTACTS", "NO_UNAVAILABLE", "RESTARTED", "SKIN_DEFORMED", "UNAVAILABLE",
+           "DevicePipeline", "Report", "tune_processor"]
 
 log = logging.getLogger("wott_hub.hub")
 
@@ -60,86 +74,32 @@ NO_CONTACTS = encode({"numOfContacts": 0, "contactLocations": [], "contactForces
 NO_UNAVAILABLE = encode({"numOfUnavailableNodes": 0, "arrayOfUnavailableNodes": []})
 """The unavailable-nodes property of a skin that reads every node (and of any before its rest frame)."""
 
-CLOSE_TIMEOUT_S = 5.0
-"""A driver's ``close()`` that has not returned by then is abandoned and reported: a stop waits no longer."""
+RESTARTING = "restarting on request"
+"""The reason a device shows while a ``restart`` closes its driver and opens it again."""
+
+RESTARTED = "driver closed and opened again; the stream continues"
+"""A ``restart``'s detail once the driver is open again (in the hub's process or a worker's)."""
 
 
-def restart_backoff() -> Backoff:
-    """The pacing of every retry of a device: a driver that raises, one that fails to open (at start or
-    on a restart, ``hub.device_actions``): 0.5 s doubling to 30 s."""
-    return Backoff(initial_s=0.5, cap_s=30.0, jitter=0.0)
+class Report(NamedTuple):
+    """A pipeline's state and counters, as a worker reports them to the hub (every second, and after
+    a device action)."""
+
+    state: str
+    reason: str
+    frames: int
+    frame_errors: int
+    restarts: int
 
 
-def driver_capabilities(driver: Driver | WorkerDevice) -> tuple[str, ...]:
-    """The device actions ``driver``'s capabilities give it (``tare``, ``recalibrate``): tested here, where
-    the driver is, and reported by a worker process when it opens a device, so the hub declares the same
-    actions for a device whatever process it runs in."""
-    names = []
-    if isinstance(driver, Tareable):
-        names.append("tare")
-    if isinstance(driver, Recalibratable):
-        names.append("recalibrate")
-    return tuple(names)
+def tune_processor(processor: FrameProcessor, driver: DeviceHandle) -> None:
+    """The below-threshold note at the driver's noise floor, for a driver whose rest readings are noisy
+    (``NoisyAtRest``: the camera skins)."""
+    if isinstance(driver, NoisyAtRest):
+        processor.set_below_threshold(float(driver.below_threshold_floor), float(driver.below_threshold_s))
 
 
-Wants = Callable[[str, int, str], bool]
-Publish = Callable[[str, int, str, int, str, "dict[str, int] | None", "SkinArrays | None"], Any]
-
-
-class RecordSink(Protocol):
-    """Where a pipeline's records go: ``EventPlane`` in the hub, ``workers.PipeSink`` in a worker."""
-
-    def wants(self, thing: str, kind: int, name: str) -> bool:
-        """Is the record needed at all? If not, it is not even encoded."""
-        ...
-
-    def publish(self, thing: str, kind: int, name: str, t_ns: int, data: str,
-                trace: dict[str, int] | None = None, skin: SkinArrays | None = None) -> Any:
-        ...
-
-
-async def open_driver(cfg: DeviceConfig, registry: Registry | None = None) -> Driver:
-    """Open and prepare the device ``cfg`` (a ``DeviceConfig``) through its plugin, here or in a worker.
-
-    Any failure is a ``DriverError`` naming the device: the plugin's own
-    ``DriverError`` as it is, a bug as ``"<what> raised <Type>: <message>"``
-    (logged once with its traceback). A driver that fails after opening is closed.
-    """
-    if registry is None:
-        from wott_hub.plugins import get_registry
-
-        registry = get_registry()
-    driver: Driver = registry.open_device(cfg)  # the registry isolates the hook call (isolation.py)
-    fault = (await attempt_async("prepare()", driver.prepare)).fault
-    if fault is None:
-        fault = attempt("description", _description_of, driver).fault
-    if fault is None:
-        return driver
-    error = fault.error
-    await attempt_async("close()", driver.close, timeout_s=CLOSE_TIMEOUT_S)
-    if isinstance(error, DriverError):
-        raise error
-    log.error("device %s: %s", cfg.id, fault.reason, exc_info=(type(error), error, error.__traceback__))
-    raise DriverError(f"device {cfg.id!r}: {fault.reason}") from error
-
-
-def tune_processor(processor: FrameProcessor, driver: Any) -> None:
-    """The below-threshold note at the driver's noise floor: a driver whose rest readings are noisy
-    (the camera skins) declares ``below_threshold_floor`` (x ε) and ``below_threshold_s``."""
-    floor = getattr(driver, "below_threshold_floor", None)
-    if floor is not None:
-        seconds = getattr(driver, "below_threshold_s", processor.params.below_threshold_s)
-        processor.set_below_threshold(float(floor), float(seconds))
-
-
-def _description_of(driver: Driver) -> DeviceDescription:
-    desc = driver.description
-    if not isinstance(desc, DeviceDescription):
-        raise TypeError(f"is a {type(desc).__name__}, not a DeviceDescription")
-    return desc
-
-
-def _health_of(driver: Driver | WorkerDevice) -> tuple[str, str]:
+def _health_of(driver: DeviceHandle) -> tuple[str, str]:
     h = driver.health()
     if not isinstance(h, HealthStatus):
         raise TypeError(f"returned a {type(h).__name__}, not a HealthStatus")
@@ -149,10 +109,11 @@ def _health_of(driver: Driver | WorkerDevice) -> tuple[str, str]:
 class DevicePipeline:
     """Frames in, records out, for one device (its Thing id ``thing``)."""
 
-    __slots__ = ("_unavailable", "contacts", "contacts_json", "driver", "frame_errors", "frames", "guard",
-                 "had_contacts", "processor", "reason", "restarts", "state", "thing", "unavailable_json")
+    __slots__ = ("_reporter", "_unavailable", "contacts", "contacts_json", "driver", "frame_errors", "frames",
+                 "guard", "had_contacts", "processor", "reason", "restarts", "state", "thing",
+                 "unavailable_json")
 
-    def __init__(self, thing: str, driver: Driver | WorkerDevice, processor: FrameProcessor | None,
+    def __init__(self, thing: str, driver: DeviceHandle, processor: FrameProcessor | None,
                  contacts_json: str | None = NO_CONTACTS) -> None:
         self.thing = thing
         self.driver = driver  # a Driver; in the hub, a worker's proxy when processor is None
@@ -167,9 +128,19 @@ class DevicePipeline:
         self.contacts_json = contacts_json  # None until then
         self.guard = Guard(f"device {thing}", logger=log)  # every call into the driver (plugin code)
         self.unavailable_json = NO_UNAVAILABLE  # the ``unavailableNodes`` property's JSON
-        self._unavailable: Any = None  # the driver's ``unavailable_nodes`` object last seen
+        self._unavailable: list[int] | None = None  # the driver's ``unavailable_nodes`` object last seen
+        self._reporter: ReportsUnavailableNodes | None = None  # the driver, if it reports unavailable nodes
         if processor is not None:
-            tune_processor(processor, driver)
+            self._tune(driver, processor)
+
+    @classmethod
+    def of_driver(cls, thing: str, driver: Driver) -> DevicePipeline:
+        """The pipeline of a driver opened in this process, with a processor made for its description."""
+        return cls(thing, driver, _processor_for(driver))
+
+    def _tune(self, driver: DeviceHandle, processor: FrameProcessor) -> None:
+        tune_processor(processor, driver)
+        self._reporter = driver if isinstance(driver, ReportsUnavailableNodes) else None
 
     # --- what the hub reports ------------------------------------------------------------
 
@@ -185,13 +156,16 @@ class DevicePipeline:
         """The ``unavailableNodes`` property's JSON."""
         return self.unavailable_json
 
-    def _unavailable_changed(self, t_ns: int, wants: Wants, publish: Publish) -> None:
+    def _unavailable_changed(self, t_ns: int, sink: RecordSink) -> None:
         """Publish ``unavailableNodes`` when the driver's ``unavailable_nodes`` changed (vision skins).
 
         Per frame: one attribute read and an identity check; the list is compared
         (and encoded) only when the driver made a new one.
         """
-        nodes = getattr(self.driver, "unavailable_nodes", None)
+        reporter = self._reporter
+        if reporter is None:
+            return
+        nodes = reporter.unavailable_nodes
         if nodes is self._unavailable:
             return
         previous, self._unavailable = self._unavailable, nodes
@@ -199,8 +173,8 @@ class DevicePipeline:
             return
         ids = [int(i) for i in nodes or ()]
         self.unavailable_json = encode({"numOfUnavailableNodes": len(ids), "arrayOfUnavailableNodes": ids})
-        if wants(self.thing, KIND_PROPERTY, UNAVAILABLE):
-            publish(self.thing, KIND_PROPERTY, UNAVAILABLE, t_ns, self.unavailable_json, None, None)
+        if sink.wants(self.thing, KIND_PROPERTY, UNAVAILABLE):
+            sink.put(Record(self.thing, 0, KIND_PROPERTY, UNAVAILABLE, t_ns, self.unavailable_json))
 
     def health_state(self) -> tuple[str, str]:
         """(state, reason): the loop's own while starting and once it is over, else the driver's health.
@@ -218,6 +192,13 @@ class DevicePipeline:
         if note and state in ("ok", "degraded") and "below threshold" not in reason:
             reason = f"{reason}; {note}" if reason else note  # a light press: the silence explained
         return state, reason
+
+    def report(self) -> Report:
+        """What a worker tells the hub each second."""
+        state, reason = self.health_state()
+        return Report(state, reason, self.frames, self.frame_errors, self.restarts)
+
+    # --- device actions --------------------------------------------------------------------------
 
     def request(self, name: str) -> str:
         """Ask the driver to ``tare`` or ``recalibrate`` (carried out on its next frame): its sentence.
@@ -237,35 +218,73 @@ class DevicePipeline:
             raise DriverError(f"device {self.thing!r}: {out.fault.reason}")
         return str(out.value or name)
 
-    def reopened(self, driver: Driver) -> None:
-        """Carry on from a freshly opened ``driver`` (a ``restart``): a new processor, the same counters
-        and contact state. Its mesh must be the served one (the TD stays true), else ``Conflict``."""
-        from wott_hub.tactile.processing import processing_params
-
-        desc = driver.description
-        served = self.processor.mesh.n_nodes if self.processor is not None else None
-        if desc.mesh.n_nodes != served:
-            raise Conflict(f"device {self.thing!r} reopened with {desc.mesh.n_nodes} nodes, not {served}: "
-                           "remove it and add it again")
-        self.driver = driver
-        self.processor = FrameProcessor(desc.mesh, processing_params(desc))
-        tune_processor(self.processor, driver)
-        self.state, self.reason = "starting", ""
-
     async def close(self) -> None:
         """Close the driver; a ``close()`` that raises or hangs is logged, never raised."""
         await self.guard.call_async("close()", self.driver.close, timeout_s=CLOSE_TIMEOUT_S)
 
+    # --- its state: the transitions ---------------------------------------------------------------
+
+    def started(self) -> None:
+        """Its frames flow (here, or in the worker that was told to run it)."""
+        self.state = "running"
+
+    def ended(self, reason: str) -> None:
+        """The driver's frame stream ended: the device is done."""
+        self.state, self.reason = "ended", reason
+
+    def failed(self, reason: str) -> None:
+        """The device cannot run now (its driver did not open, its worker process exited...)."""
+        self.state, self.reason = "failed", reason
+
+    def restarting(self) -> None:
+        """A ``restart`` is closing the driver and opening it again; counted where the driver runs (a
+        worker's count reaches the hub in its reports)."""
+        if self.processor is not None:
+            self.restarts += 1
+        self.state, self.reason = "starting", RESTARTING
+
+    def retrying(self, reason: str, attempt: int, delay_s: float) -> None:
+        """It failed to open for ``reason``; attempt ``attempt`` comes in ``delay_s``."""
+        self.reason = f"{reason} (retry {attempt} in {delay_s:.1f} s)"
+
+    def reopened(self, driver: Driver) -> None:
+        """Carry on from a freshly opened ``driver`` (a ``restart``): a new processor, the same counters
+        and contact state. Its mesh must be the served one (the TD stays true): else the device has
+        failed and ``Conflict`` is raised, with ``driver`` kept to be closed (``close``)."""
+        desc = driver.description
+        served = self.processor.mesh.n_nodes if self.processor is not None else None
+        self.driver = driver
+        if desc.mesh.n_nodes != served:
+            reason = (f"device {self.thing!r} reopened with {desc.mesh.n_nodes} nodes, not {served}: "
+                      "remove it and add it again")
+            self.failed(reason)
+            raise Conflict(reason)
+        self.processor = processor = _processor_for(driver)
+        self._tune(driver, processor)
+        self.state, self.reason = "starting", ""
+
+    def remote_health(self, report: Report) -> None:
+        """A worker's report of the pipeline it runs (``report`` there); the proxy mirrors the driver's
+        health."""
+        self.frames, self.frame_errors, self.restarts = report.frames, report.frame_errors, report.restarts
+        if report.state in ("ended", "failed"):
+            self.state, self.reason = report.state, report.reason
+        else:
+            self.state = "running"
+            with contextlib.suppress(ValueError):  # not a Health: nothing to mirror
+                self.driver.set_health(Health(report.state), report.reason)
+
     # --- frames to records -------------------------------------------------------------------
 
-    def records(self, res: FrameResult, t_in: int, wants: Wants, publish: Publish) -> None:
-        """Publish the records of one frame that someone wants; unwanted ones are not even encoded.
+    def records(self, res: FrameResult, t_in: int, sink: RecordSink) -> None:
+        """Put the records of one frame that ``sink`` wants; unwanted ones are not even encoded.
 
         A skin packet when one is due, one record per action, and the contacts
         property while touched and once more at rest. ``t_in``: trace stamps ride
-        on the skin packet (0: not tracing). ``wants``/``publish``: a sink's, bound.
+        on the skin packet (0: not tracing).
         """
         thing = self.thing
+        wants, put = sink.wants, sink.put
         trace = None
         if t_in:
             trace = {"in": t_in, "proc": time.perf_counter_ns()}
@@ -274,41 +293,41 @@ class DevicePipeline:
             data = skin_deformed_json(res)
             if trace is not None:
                 trace["enc"] = time.perf_counter_ns()
-            publish(thing, KIND_EVENT, SKIN_DEFORMED, t_ns, data, trace,
-                    SkinArrays(res.deformed_nodes, res.intensity))
+            put(Record(thing, 0, KIND_EVENT, SKIN_DEFORMED, t_ns, data, trace,
+                       SkinArrays(res.deformed_nodes, res.intensity)))
         if res.actions and wants(thing, KIND_EVENT, ACTION):
             for action in res.actions:
-                publish(thing, KIND_EVENT, ACTION, t_ns, encode(action), None, None)
+                put(Record(thing, 0, KIND_EVENT, ACTION, t_ns, encode(action)))
         if res.actions and wants(thing, KIND_EVENT, ACTION_DETAILS):
             for details in res.action_details():
-                publish(thing, KIND_EVENT, ACTION_DETAILS, t_ns, encode(details), None, None)
+                put(Record(thing, 0, KIND_EVENT, ACTION_DETAILS, t_ns, encode(details)))
         if res.contacts or self.had_contacts:  # the value changes while touched and once at rest
             self.had_contacts = bool(res.contacts)
             self.contacts = res
             if wants(thing, KIND_PROPERTY, CONTACTS):
                 self.contacts_json = contacts_json(res)
-                publish(thing, KIND_PROPERTY, CONTACTS, t_ns, self.contacts_json, None, None)
+                put(Record(thing, 0, KIND_PROPERTY, CONTACTS, t_ns, self.contacts_json))
             else:
                 self.contacts_json = None
 
-    async def run(self, sink: RecordSink, *, trace: bool = False,
-                  frame_done: Callable[[], None] | None = None) -> None:
+    async def run(self, sink: RecordSink, *, trace: bool = False) -> None:
         """Run the driver through the processor into ``sink`` until the stream ends.
 
         A frame the processor refuses is counted and skipped; a driver that raises
         is restarted with backoff (0.5 s doubling to 30 s), its failure logged once
         (``guard``) and shown as ``"frames() raised <Type>: <message>"``. ``trace``: stamp the
-        skin packets (perf_counter ns). ``frame_done``: called after each frame's
-        records (the pipe sink sends them as one message).
+        skin packets (perf_counter ns). A ``types.FrameSink`` (a worker's pipe) is told
+        after each frame's records.
         """
         driver, processor = self.driver, self.processor
         assert isinstance(driver, Driver) and processor is not None  # a worker's pipeline runs in the worker
         backoff = restart_backoff()
         clock = time.monotonic
-        wants, publish, records = sink.wants, sink.publish, self.records
+        records, unavailable_changed = self.records, self._unavailable_changed
+        frame_done = sink.frame_done if isinstance(sink, FrameSink) else None
         while True:
             try:
-                self.state = "running"
+                self.started()
                 last_yield = clock()
                 async for frame in driver.frames():
                     # A driver that is behind may yield frames without ever awaiting; then this
@@ -324,51 +343,40 @@ class DevicePipeline:
                         self.reason = str(e)
                         continue
                     self.frames += 1
-                    records(res, t_in, wants, publish)
-                    self._unavailable_changed(res.t_ns, wants, publish)
+                    records(res, t_in, sink)
+                    unavailable_changed(res.t_ns, sink)
                     if frame_done is not None:
                         frame_done()
                     if backoff.attempts:
                         backoff.reset()
-                self.state = "ended"
-                self.reason = "the device's frame stream ended"
+                self.ended("the device's frame stream ended")
                 return
             except asyncio.CancelledError:
                 raise
             except CAUGHT as e:  # a driver bug (even a sys.exit()): report, back off, try again
                 self.restarts += 1
-                self.state = "failed"
                 delay = backoff.next_delay()
-                self.reason = self.guard.failed("frames()", e, retry_s=delay).reason
+                self.failed(self.guard.failed("frames()", e, retry_s=delay).reason)
                 await asyncio.sleep(delay)
 
     # --- a pipeline that runs in a worker process, seen from the hub --------------------------
 
-    def remote_records(self, recs: list[tuple[Any, ...]], sink: RecordSink) -> None:
-        """One frame's records, made and encoded by the worker (``(kind, name, t_ns, data, trace, skin)``):
-        keep the contacts, pass on the wanted."""
-        thing, wants, publish = self.thing, sink.wants, sink.publish
+    def remote_records(self, recs: list[Record], sink: RecordSink) -> None:
+        """One frame's records, made and encoded by the worker: keep the contacts, pass on the wanted."""
+        thing, wants, put = self.thing, sink.wants, sink.put
         self.frames += 1
-        for kind, name, t_ns, data, trace, skin in recs:
+        for rec in recs:
+            kind, name = rec.kind, rec.name
             if kind == KIND_PROPERTY and name == CONTACTS:
-                self.contacts_json = data
+                self.contacts_json = rec.data
             elif kind == KIND_PROPERTY and name == UNAVAILABLE:
-                self.unavailable_json = data
+                self.unavailable_json = rec.data
             if wants(thing, kind, name):
-                publish(thing, kind, name, t_ns, data, trace, skin)
+                put(rec)
 
-    def remote_health(self, state: str, reason: str, frames: int, frame_errors: int, restarts: int) -> None:
-        """A worker's report of the pipeline it runs (``report`` there)."""
-        self.frames, self.frame_errors, self.restarts = frames, frame_errors, restarts
-        if state in ("ended", "failed"):
-            self.state, self.reason = state, reason
-        else:
-            self.state = "running"
-            driver = self.driver
-            assert not isinstance(driver, Driver)  # a worker reports: the driver is its proxy
-            driver.mirror(state, reason)
 
-    def report(self) -> tuple[str, str, int, int, int]:
-        """(state, reason, frames, frame_errors, restarts): what a worker tells the hub each second."""
-        state, reason = self.health_state()
-        return state, reason, self.frames, self.frame_errors, self.restarts
+def _processor_for(driver: Driver) -> FrameProcessor:
+    from wott_hub.tactile.processing import processing_params
+
+    desc = driver.description
+    return FrameProcessor(desc.mesh, processing_params(desc))
