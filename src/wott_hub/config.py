@@ -146,17 +146,13 @@ class HubConfig:
         devices = data.get("device", [])
         if not isinstance(devices, list):
             raise ConfigError(f"{source}: 'device' must be an array of tables ([[device]])")
-        from wott_hub.errors import DriverError
         from wott_hub.plugins import DeviceConfig
 
         parsed = []
         ids: set[str] = set()
         for i, dev in enumerate(devices):
             where = f"{source}: device[{i}]"
-            try:
-                cfg = DeviceConfig.from_table(dev, where=where)
-            except DriverError as e:
-                raise ConfigError(str(e)) from None
+            cfg = DeviceConfig.from_table(dev, where=where)  # a SettingsError: a ConfigError too
             if cfg.id in ids:
                 raise ConfigError(f"{where}.id: {cfg.id!r} is used by another device")
             if cfg.id == "hub":
