@@ -15,15 +15,14 @@ from wott_hub.errors import SettingsError
 
 __all__ = ["DeviceConfig", "DeviceTable", "FamilyInfo", "PluginInfo"]
 
-Name = Annotated[str, says("a non-empty string", pattern=r"\S")]
-
 
 class DeviceTable(Model, forbid_unknown_fields=False):
-    """The two keys every ``[[device]]`` table has; the others are its family's settings, checked
-    against the family's model when the device opens (``Registry.validate``)."""
+    """A device: id, family, and the family's settings."""
 
-    id: Name
-    family: Name
+    # the other keys are the family's settings, checked against its model when the device opens
+    id: Annotated[str, says("a non-empty string", pattern=r"\S", description="Unique device id (not 'hub').")]
+    family: Annotated[str, says("a non-empty string", pattern=r"\S",
+                                description="The device family (a plugin's).")]
 
 
 @dataclass(frozen=True)
