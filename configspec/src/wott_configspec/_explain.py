@@ -36,7 +36,8 @@ def explain(model: type[Any], data: Any, message: str, where: str) -> str:
             break
     info, phrase = _walk(mi.type_info(model), steps, value)
     if (u := _UNKNOWN.match(msg)) is not None:
-        known = ", ".join(sorted(f.encode_name for f in getattr(info, "fields", ())))
+        fields = info.fields if isinstance(info, mi.StructType) else ()
+        known = ", ".join(sorted(f.encode_name for f in fields))
         return f"{_place(where, [*steps, u['key']])}: unknown key (known: {known})"
     if (r := _MISSING.match(msg)) is not None:
         return f"{_place(where, [*steps, r['key']])}: required, missing"
@@ -73,7 +74,9 @@ def _choices(info: Any) -> tuple[Any, ...] | None:
 
 def _size_text(info: Any) -> str:
     """``"2 items"``, ``"at least 1 character"``...: the length bounds of a list or string, or ''."""
-    low, high = getattr(info, "min_length", None), getattr(info, "max_length", None)
+    if not isinstance(info, _SIZED):
+        return ""
+    low, high = info.min_length, info.max_length
     unit = "character" if isinstance(info, mi.StrType) else "item"
     if low is None and high is None:
         return ""
@@ -88,6 +91,8 @@ def _size_text(info: Any) -> str:
     return f"{count} {unit}" if count.split()[-1] == "1" else f"{count} {unit}s"
 
 
+_SIZED = (mi.StrType, mi.BytesType, mi.ListType, mi.VarTupleType, mi.SetType, mi.FrozenSetType, mi.DictType)
+
 _PLAIN: dict[str, str] = {  # what a msgspec.inspect type is called when its declaration gives no phrase
     "FloatType": "a number", "IntType": "a whole number", "BoolType": "true or false",
     "StrType": "a string", "ListType": "a list", "VarTupleType": "a list", "TupleType": "a list",
@@ -97,7 +102,9 @@ _PLAIN: dict[str, str] = {  # what a msgspec.inspect type is called when its dec
 
 def range_text(info: Any) -> str:
     """``"from 0 to 64"``, ``"above 0 and at most 60000"``...: the bounds of a number type, or ''."""
-    ge, gt, le, lt = (getattr(info, k, None) for k in ("ge", "gt", "le", "lt"))
+    if not isinstance(info, mi.IntType | mi.FloatType):
+        return ""
+    ge, gt, le, lt = info.ge, info.gt, info.le, info.lt
     if ge is not None and le is not None:
         return f"from {_num(ge)} to {_num(le)}"
     low = f"at least {_num(ge)}" if ge is not None else f"above {_num(gt)}" if gt is not None else ""
