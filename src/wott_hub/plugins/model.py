@@ -1,7 +1,10 @@
 """The plain values that cross the plugin boundary: device configs, families, plugin reports.
 
 They are dataclasses of built-in types, so a plugin needs nothing from the hub
-but these names to describe itself, and the CLI can print them as JSON.
+but these names to describe itself, and the CLI can print them as JSON. A
+``DeviceConfig`` is read from a ``[[device]]`` table declared once
+(``DeviceTable``, through ``wott_hub.configspec``): its check, its error text
+and its JSON Schema in docs/configuration.md.
 """
 
 from __future__ import annotations
