@@ -157,6 +157,20 @@ def test_config_modules_import_no_heavy_library_and_no_cycle():
     assert "wott_hub.config " not in src and "from wott_hub.config import" not in src
 
 
+def test_only_the_hubs_configspec_reads_through_wott_configspec():
+    """Every hub module reads its tables through ``wott_hub.configspec``: its errors are the hub's."""
+    import ast
+
+    importers = []
+    for path in sorted((ROOT / "src" / "wott_hub").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            if any(n == "wott_configspec" or n.startswith("wott_configspec.") for n in names):
+                importers.append(str(path.relative_to(ROOT)))
+    assert sorted(set(importers)) == ["src/wott_hub/configspec.py"]
+
+
 # -- the directory's own settings (its own distribution, its own single ConfigError) ---------------
 
 @pytest.mark.parametrize(("key", "value", "message"), [
@@ -257,7 +271,8 @@ def test_schema_families_refuse_nan_and_infinity_too():
 
 
 def test_a_number_whose_schema_declares_no_maximum_is_still_bounded():
-    from wott_hub.plugin_api import DriverError, with_defaults
+    from wott_hub.plugin_api import DriverError
+    from wott_hub.plugins.dict_schema import with_defaults
 
     schema = {"properties": {
         "x": {"type": "number"}, "xs": {"type": "array", "items": {"type": "number"}},

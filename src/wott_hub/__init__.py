@@ -30,6 +30,7 @@ if TYPE_CHECKING:
         HistoryError,
         InvalidInput,
         NotFound,
+        SettingsError,
         WottHubError,
     )
     from wott_hub.hub.lifecycle import Hub
@@ -49,6 +50,7 @@ _LAZY = {
     "HistoryError": "wott_hub.errors",
     "InvalidInput": "wott_hub.errors",
     "NotFound": "wott_hub.errors",
+    "SettingsError": "wott_hub.errors",
 }
 
 __all__ = [
@@ -61,6 +63,7 @@ __all__ = [
     "HubConfig",
     "InvalidInput",
     "NotFound",
+    "SettingsError",
     "WottHubError",
     "__version__",
     "serve",

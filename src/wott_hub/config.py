@@ -146,17 +146,13 @@ class HubConfig:
         devices = data.get("device", [])
         if not isinstance(devices, list):
             raise ConfigError(f"{source}: 'device' must be an array of tables ([[device]])")
-        from wott_hub.errors import DriverError
         from wott_hub.plugins import DeviceConfig
 
         parsed = []
         ids: set[str] = set()
         for i, dev in enumerate(devices):
             where = f"{source}: device[{i}]"
-            try:
-                cfg = DeviceConfig.from_table(dev, where=where)
-            except DriverError as e:
-                raise ConfigError(str(e)) from None
+            cfg = DeviceConfig.from_table(dev, where=where)  # a SettingsError: a ConfigError too
             if cfg.id in ids:
                 raise ConfigError(f"{where}.id: {cfg.id!r} is used by another device")
             if cfg.id == "hub":
@@ -202,12 +198,8 @@ def check_port(value: int | None, option: str = "--port") -> int | None:
 def config_schema() -> dict[str, Any]:
     """The JSON Schema of a whole hub config file: ``[hub]``, ``[directory]``, ``[discovery]`` and
     ``[[device]]`` (whose other keys are the family's settings: ``wott-hub plugins families``)."""
-    device = {"type": "object", "required": ["id", "family"], "additionalProperties": True,
-              "properties": {"id": {"type": "string", "minLength": 1,
-                                    "description": "Unique device id (not 'hub')."},
-                             "family": {"type": "string", "minLength": 1,
-                                        "description": "The device family (a plugin's)."}},
-              "description": "A device: id, family, and the family's settings."}
+    from wott_hub.plugins.model import DeviceTable
+
     defs: dict[str, Any] = {}
     props: dict[str, Any] = {}
     for key, model in (("hub", HUB_TABLE), ("directory", DIRECTORY_TABLE), ("discovery", DISCOVERY_TABLE),
@@ -215,7 +207,9 @@ def config_schema() -> dict[str, Any]:
         schema = json_schema(model)
         defs.update(schema.get("$defs", {}))
         props[key] = {"$ref": schema["$ref"]} if "$ref" in schema else schema
-    props["device"] = {"type": "array", "items": device}
+    device = json_schema(DeviceTable)
+    defs.update(device.get("$defs", {}))
+    props["device"] = {"type": "array", "items": {"$ref": device["$ref"]}}
     defs["hub"]["properties"]["ws_port"]["anyOf"].append({"const": False})  # the file's spelling of "off"
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "wott-hub configuration",
             "type": "object", "properties": props, "additionalProperties": False, "$defs": defs}

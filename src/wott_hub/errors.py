@@ -8,7 +8,17 @@ Anything else that escapes is a bug, reported as such.
 
 Subclasses also derive from the built-in they replace (``ValueError`` for bad
 input, ``LookupError`` for a missing thing) so ``except ValueError`` written
-before the tree existed keeps working.
+before the tree existed keeps working. The errors of the pure domain (a bad
+mesh, frame or material in ``tactile/``) and of a scene file are ``InvalidInput``
+subclasses defined beside the code that raises them; a test (tests/test_errors.py)
+keeps every public exception class of the package, and of the first-party
+plugins, inside the tree.
+
+``DriverError`` is a device that cannot be opened or run; a device whose table or
+settings are wrong is a ``SettingsError``: a ``ConfigError`` (the person who wrote
+them must change them: 400, exit 2) that is also a ``DriverError``, because that
+is what ``except DriverError`` written before the two were told apart (plugins,
+embedding programs) catches around opening a device.
 
 This module imports nothing of the hub: every layer, the pure domain in
 ``tactile/`` included, may import it.
@@ -25,6 +35,7 @@ __all__ = [
     "HistoryError",
     "InvalidInput",
     "NotFound",
+    "SettingsError",
     "WorkerDied",
     "WottHubError",
     "exit_code",
@@ -53,7 +64,12 @@ class Conflict(WottHubError):
 
 
 class DriverError(WottHubError):
-    """A device cannot be opened or run at all (bad settings, model contract mismatch, no port)."""
+    """A device cannot be opened or run at all (model contract mismatch, no port, a plugin's bug)."""
+
+
+class SettingsError(ConfigError, DriverError):
+    """A device's ``[[device]]`` table or settings are wrong (a key missing, an unknown family, a value
+    out of bounds); the message names the device, family and setting."""
 
 
 class WorkerDied(DriverError):

@@ -11,17 +11,20 @@ What is here, by the job it does in a plugin:
 - hooks: ``hookimpl``, ``DeviceConfig`` (what ``wott_hub_open_device`` is given),
   ``FamilyInfo`` (what ``wott_hub_families`` returns), ``naming_device`` (prefixes
   a ``DriverError`` with the device and family);
-- the driver contract: ``Driver``, ``Health``, ``HealthStatus``, ``DriverError`` and
-  the optional capabilities a driver may declare (``Retargetable``, ``Tareable``,
+- the driver contract: ``Driver``, ``Health``, ``HealthStatus`` and the optional
+  capabilities a driver may declare (``Retargetable``, ``Tareable``,
   ``Recalibratable``, ``NoisyAtRest``, ``ReportsUnavailableNodes``); ``Backoff`` to
   reconnect a transport;
+- errors, all in the hub's one tree (``WottHubError``): ``SettingsError`` for a
+  setting that cannot open a device, ``DriverError`` for a device that cannot be
+  opened or run, ``InvalidInput`` for data that can never be right as given
+  (``FrameError``, ``MeshError``, ``SceneError`` are kinds of it); a plugin's own
+  public error classes derive from one of these;
 - settings: a family's settings as a ``SettingsModel`` (fields with ``Meta``
   bounds; ``settings_schema`` gives its JSON Schema, ``read_settings`` checks a
   table against it, ``SettingsTable`` the base of a nested table, ``model_fields``
   hands a read table to a plain class;
-  ``BackoffSettings`` the two reconnect settings, ``backoff`` reads them); for
-  the older JSON-Schema-dict families (still accepted) ``BACKOFF_PROPERTIES``,
-  ``defaults`` and ``with_defaults``;
+  ``BackoffSettings`` the two reconnect settings, ``backoff`` reads them);
 - the tactile domain, no I/O: ``SkinMesh`` and its builders, ``DeviceDescription``
   with ``SkinShape``, ``CoordinateFrame`` and ``Material``, ``TactileFrame``;
   ``Indenter`` / ``indent`` (contact mechanics for simulators); ``Scene``
@@ -46,22 +49,19 @@ from wott_hub.drivers.base import (
     Retargetable,
     Tareable,
 )
-from wott_hub.errors import WottHubError
+from wott_hub.errors import InvalidInput, SettingsError, WottHubError
 from wott_hub.plugins.hookspecs import hookimpl
 from wott_hub.plugins.model import DeviceConfig, FamilyInfo
 from wott_hub.plugins.naming import naming_device
 from wott_hub.plugins.settings import (
-    BACKOFF_PROPERTIES,
     BackoffSettings,
     Meta,
     SettingsModel,
     SettingsTable,
     backoff,
-    defaults,
     model_fields,
     read_settings,
     settings_schema,
-    with_defaults,
 )
 from wott_hub.sim.scene import Scene, SceneError
 from wott_hub.tactile import (
@@ -82,7 +82,6 @@ from wott_hub.tactile import (
 from wott_hub.tactile.indentation import Indenter, indent
 
 __all__ = [
-    "BACKOFF_PROPERTIES",
     "MATERIALS",
     "Backoff",
     "BackoffSettings",
@@ -96,6 +95,7 @@ __all__ = [
     "Health",
     "HealthStatus",
     "Indenter",
+    "InvalidInput",
     "Material",
     "MeshError",
     "Meta",
@@ -105,6 +105,7 @@ __all__ = [
     "Retargetable",
     "Scene",
     "SceneError",
+    "SettingsError",
     "SettingsModel",
     "SettingsTable",
     "SkinMesh",
@@ -115,7 +116,6 @@ __all__ = [
     "backoff",
     "barrel",
     "cylinder",
-    "defaults",
     "flat_pad",
     "hookimpl",
     "indent",
@@ -124,5 +124,4 @@ __all__ = [
     "read_settings",
     "settings_schema",
     "taclink_barrel",
-    "with_defaults",
 ]

@@ -4,39 +4,31 @@ The same settings serve the standalone ``wott-directory`` command and a hub
 that embeds the directory, so nothing here knows about sockets: the embedding
 server says where it listens and the directory derives its public URL from that.
 
-Declared once, like the hub's own tables (``wott_hub.configspec``): each field's
-type carries its bounds (``Annotated[int, Meta(ge=1, le=10_000)]``) and its
-description. ``DirectorySettings`` stays a frozen dataclass (what embedding
-programs build and ``dataclasses.replace``); the msgspec ``Struct`` derived from
-it (``TABLE``) checks every value when the settings are made, from the command
-line or in Python, and gives the JSON Schema (``settings_schema``). A NaN, an
-infinity, a wrong type or a value out of bounds is this distribution's one
-``ConfigError``, naming the setting: ``page_size: a whole number, got 0; must be
-from 1 to 10000``. The directory is its own distribution and does not depend on
-wott_hub; a hub that embeds it builds these settings from its already checked
-``[directory]`` table and translates a ``ConfigError`` from here into its own
+Declared once, like the hub's own tables, with ``wott_configspec`` (the distribution
+both use, so their errors read alike): each field's type carries its bounds
+(``Annotated[int, Meta(ge=1, le=10_000)]``) and its description. ``DirectorySettings``
+stays a frozen dataclass (what embedding programs build and ``dataclasses.replace``);
+the msgspec ``Struct`` derived from it (``TABLE``) checks every value when the settings
+are made, from the command line or in Python, and gives the JSON Schema
+(``settings_schema``). A NaN, an infinity, a wrong type or a value out of bounds is
+``wott_configspec``'s ``ConfigError``, this distribution's one config error, naming the
+setting: ``page_size: a whole number, got 0; must be from 1 to 10000``. The directory
+does not depend on wott_hub; a hub that embeds it builds these settings from its already
+checked ``[directory]`` table and translates a ``ConfigError`` from here into its own
 once (``wott_hub.network.config.embedded_directory_settings``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import ipaddress
-import re
 import uuid
 from dataclasses import dataclass, replace
-from typing import Annotated, Any, get_type_hints
+from typing import Annotated, Any
 
-import msgspec
-import msgspec.inspect as mi
-import msgspec.json
 from msgspec import Meta
+from wott_configspec import ConfigError, check, json_schema, table_of
 
 __all__ = ["TABLE", "ConfigError", "DirectorySettings", "is_loopback", "settings_schema"]
-
-
-class ConfigError(ValueError):
-    """Settings that would make the directory unsafe or unusable (the directory's only config error)."""
 
 
 def is_loopback(host: str) -> bool:
@@ -98,11 +90,7 @@ class DirectorySettings:
     def __post_init__(self) -> None:
         if not self.base_url.endswith("/"):
             object.__setattr__(self, "base_url", self.base_url + "/")
-        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        try:
-            msgspec.convert(values, TABLE)
-        except msgspec.ValidationError as e:
-            raise ConfigError(_explain(str(e), values)) from None
+        check(self, TABLE, "")
         if self.token is not None and not self.token.strip():
             raise ConfigError("token: empty; leave it unset to have no token")
 
@@ -120,59 +108,10 @@ class DirectorySettings:
         return replace(self, base_url=base_url)
 
 
-def _table(cls: type[Any]) -> type[msgspec.Struct]:
-    """The msgspec Struct of ``cls``'s fields (types with their bounds, defaults): the checker.
-
-    Derived, not written twice: the dataclass is the declaration."""
-    hints = get_type_hints(cls, include_extras=True)
-    return msgspec.defstruct("DirectoryTable", [(f.name, hints[f.name], f.default)
-                                                 for f in dataclasses.fields(cls)],
-                             kw_only=True, forbid_unknown_fields=True, module=__name__)
-
-
-TABLE = _table(DirectorySettings)
-"""The msgspec Struct that checks ``DirectorySettings``: read a TOML table with ``msgspec.convert``."""
+TABLE = table_of(DirectorySettings, "DirectoryTable")
+"""The msgspec Struct that checks ``DirectorySettings``: read a TOML table with ``wott_configspec.read``."""
 
 
 def settings_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of the directory's settings: bounds, defaults, descriptions."""
-    return msgspec.json.schema(TABLE)
-
-
-_KIND = {"IntType": "a whole number", "FloatType": "a number", "StrType": "a string",
-         "BoolType": "true or false"}
-
-
-def _explain(message: str, values: dict[str, Any]) -> str:
-    """msgspec's ``Expected `int` >= 1 - at `$.page_size``` as
-    ``page_size: a whole number, got 0; must be from 1 to 10000``."""
-    m = re.search(r"at `\$\.(\w+)`", message)
-    if m is None:
-        return message
-    name = m[1]
-    table = mi.type_info(TABLE)
-    assert isinstance(table, mi.StructType)  # TABLE is a Struct
-    field = next(f for f in table.fields if f.name == name)
-    info = field.type
-    while isinstance(info, mi.Metadata):
-        info = info.type
-    if isinstance(info, mi.UnionType):  # ``str | None``: the member that is not None
-        info = next(t for t in info.types if not isinstance(t, mi.NoneType))
-        while isinstance(info, mi.Metadata):
-            info = info.type
-    text = f"{name}: {_KIND.get(type(info).__name__, 'a valid value')}, got {values[name]!r}"
-    bounds = _range(info)
-    return f"{text}; must be {bounds}" if bounds else text
-
-
-def _range(info: Any) -> str:
-    ge, gt, le = (getattr(info, k, None) for k in ("ge", "gt", "le"))
-    if ge is not None and le is not None:
-        return f"from {_n(ge)} to {_n(le)}"
-    low = f"at least {_n(ge)}" if ge is not None else f"above {_n(gt)}" if gt is not None else ""
-    high = f"at most {_n(le)}" if le is not None else ""
-    return " and ".join(p for p in (low, high) if p)
-
-
-def _n(x: float) -> str:
-    return str(int(x)) if float(x).is_integer() else f"{x:g}"
+    return json_schema(TABLE)

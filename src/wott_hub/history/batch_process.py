@@ -34,6 +34,8 @@ import sys
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
 
+from wott_hub.errors import HistoryError
+
 if TYPE_CHECKING:
     from sqlalchemy.engine import URL
 
@@ -45,7 +47,7 @@ Wire = tuple[int, int, int, int, str, str, "tuple[bytes, bytes] | None"]
 """A record as it crosses: ``(thing_key, seq, t_ns, kind, name, data, skin)``."""
 
 
-class BatchProcessError(Exception):
+class BatchProcessError(HistoryError):
     """The process could not write the batch (its message), or is gone: retry later."""
 
 

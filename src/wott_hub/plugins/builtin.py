@@ -67,18 +67,18 @@ def wott_hub_open_device(config: DeviceConfig) -> Driver:
         return wot_remote.open_device(config)
     from dataclasses import replace
 
-    from wott_hub.drivers.base import DriverError
     from wott_hub.drivers.scene import SceneDriver
+    from wott_hub.errors import SettingsError
     from wott_hub.examples import example_device
     from wott_hub.sim.scene import Scene, SceneError
 
     with naming_device(config):
         s = read_settings(SceneSettings, config.settings)
         if (s.scene is None) == (s.step is None):  # the registry's schema says so too; opened directly
-            raise DriverError("setting 'scene': needs one of 'scene' or 'step'" if s.scene is None
-                              else "setting 'scene': give only one of 'scene' or 'step'")
+            raise SettingsError("setting 'scene': needs one of 'scene' or 'step'" if s.scene is None
+                                else "setting 'scene': give only one of 'scene' or 'step'")
         if s.material is not None and s.material not in MATERIALS:
-            raise DriverError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
+            raise SettingsError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
         try:
             if s.scene is not None:
                 scene = Scene.load(s.scene)
@@ -86,7 +86,7 @@ def wott_hub_open_device(config: DeviceConfig) -> Driver:
                 scene = Scene.from_dict({"scene": {"name": config.id, "loop": s.loop}, "step": s.step},
                                         source=f"device {config.id!r} step")
         except SceneError as e:
-            raise DriverError(f"setting 'scene': {e}") from None
+            raise SettingsError(f"setting 'scene': {e}") from None
     desc = example_device(s.shape, device_id=config.id)
     changes: dict[str, Any] = {"family": FAMILY, "title": config.id if s.title is None else s.title}
     if s.material is not None:

@@ -55,9 +55,10 @@ def wott_hub_open_device(config: DeviceConfig) -> Driver:
     family's model (or schema) and completed with its defaults.
     Return a ``Driver`` (not yet started: it starts when the hub iterates
     ``frames()``); anything else is an error of the plugin. Raise
-    ``DriverError`` with a message naming the setting at fault when the device
-    cannot be opened with these settings. Do not block here: the transport is
-    opened and kept alive inside the driver.
+    ``SettingsError`` with a message naming the setting at fault when the device
+    cannot be opened with these settings (``DriverError`` when it cannot be
+    opened at all). Do not block here: the transport is opened and kept alive
+    inside the driver.
     """
 
 

@@ -1,27 +1,40 @@
 """The plain values that cross the plugin boundary: device configs, families, plugin reports.
 
 They are dataclasses of built-in types, so a plugin needs nothing from the hub
-but these names to describe itself, and the CLI can print them as JSON.
+but these names to describe itself, and the CLI can print them as JSON. A
+``DeviceConfig`` is read from a ``[[device]]`` table declared once
+(``DeviceTable``, through ``wott_hub.configspec``): its check, its error text
+and its JSON Schema in docs/configuration.md.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
-from wott_hub.drivers.base import DriverError
+from wott_hub.configspec import Model, read, says
+from wott_hub.errors import SettingsError
 
-__all__ = ["DeviceConfig", "FamilyInfo", "PluginInfo"]
+__all__ = ["DeviceConfig", "DeviceTable", "FamilyInfo", "PluginInfo"]
+
+
+class DeviceTable(Model, forbid_unknown_fields=False):
+    """A device: id, family, and the family's settings."""
+
+    # the other keys are the family's settings, checked against its model when the device opens
+    id: Annotated[str, says("a non-empty string", pattern=r"\S", description="Unique device id (not 'hub').")]
+    family: Annotated[str, says("a non-empty string", pattern=r"\S",
+                                description="The device family (a plugin's).")]
 
 
 @dataclass(frozen=True)
 class DeviceConfig:
     """One device of the hub: which family opens it and with which settings.
 
-    In the hub config it is a ``[[device]]`` TOML table: ``id`` and ``family``
-    are taken out, every other key is a setting checked against the family's
-    JSON Schema when the device is opened.
+    In the hub config it is a ``[[device]]`` TOML table (``DeviceTable``): ``id``
+    and ``family`` are taken out, every other key is a setting checked against
+    the family's model when the device is opened.
     """
 
     id: str
@@ -30,15 +43,12 @@ class DeviceConfig:
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any], where: str = "device") -> DeviceConfig:
-        """Build from a ``[[device]]`` table; ``where`` names it in errors (e.g. ``hub.toml: device[2]``)."""
-        if not isinstance(table, Mapping):
-            raise DriverError(f"{where}: expected a table, got {type(table).__name__}")
-        for key in ("id", "family"):
-            value = table.get(key)
-            if not isinstance(value, str) or not value.strip():
-                raise DriverError(f"{where}.{key}: required, a non-empty string (got {value!r})")
-        settings = {k: v for k, v in table.items() if k not in ("id", "family")}
-        return cls(id=table["id"], family=table["family"], settings=settings)
+        """Build from a ``[[device]]`` table; ``where`` names it in a ``SettingsError`` (e.g.
+        ``hub.toml: device[2]``, then ``.id``)."""
+        data = dict(table) if isinstance(table, Mapping) else table
+        head: DeviceTable = read(DeviceTable, data, where, error=SettingsError)
+        settings = {k: v for k, v in data.items() if k not in ("id", "family")}
+        return cls(id=head.id, family=head.family, settings=settings)
 
     def to_table(self) -> dict[str, Any]:
         return {"id": self.id, "family": self.family, **self.settings}
@@ -48,16 +58,12 @@ class DeviceConfig:
 class FamilyInfo:
     """A device family a plugin provides.
 
-    ``schema`` is a JSON Schema (draft 2020-12) of the device settings; put a
-    ``default`` and a ``description`` on each property: the registry fills the
-    defaults in before the plugin sees the settings, and ``wott-hub plugins
-    families`` shows the descriptions to users. ``plugin`` is filled in by the
-    registry; a plugin leaves it empty.
-
-    ``schema`` may instead be, and for every first-party family is, a settings model
-    (``wott_hub.plugins.settings.SettingsModel``, a msgspec Struct whose fields carry their
-    bounds): the registry replaces it with the model's JSON Schema and checks every device's
-    settings against the model itself. The dict form stays for third-party plugins.
+    ``schema`` is the family's settings model (``wott_hub.plugins.settings.SettingsModel``, a
+    msgspec Struct whose fields carry their bounds, defaults and descriptions): the registry
+    replaces it with the model's JSON Schema (what ``wott-hub plugins families`` shows) and
+    checks every device's settings against the model itself. A JSON Schema (draft 2020-12)
+    dict is accepted too, for plugins written before models (``dict_schema.py``). ``plugin``
+    is filled in by the registry; a plugin leaves it empty.
     """
 
     name: str

@@ -21,12 +21,14 @@ from typing import TYPE_CHECKING, Any
 import pluggy
 
 from wott_hub.drivers.base import Driver, DriverError
+from wott_hub.errors import SettingsError
 
 from . import hookspecs
+from .dict_schema import with_defaults
 from .isolation import Fault, attempt
 from .loader import ENTRY_POINT_GROUP, describe_exception, discover, selected_names
 from .model import DeviceConfig, FamilyInfo, PluginInfo
-from .settings import model_settings, settings_schema, with_defaults
+from .settings import model_settings, settings_schema
 
 if TYPE_CHECKING:
     from jsonschema.exceptions import SchemaError
@@ -230,13 +232,14 @@ class Registry:
 
     # -- devices -------------------------------------------------------------
     def validate(self, cfg: DeviceConfig) -> DeviceConfig:
-        """``cfg`` with its settings checked against the family's schema and defaults filled in."""
+        """``cfg`` with its settings checked against the family's schema and defaults filled in; a
+        ``SettingsError`` names the device, family and setting at fault."""
         families = self.families()
         info = families.get(cfg.family)
         if info is None:
             known = ", ".join(sorted(families)) or "none"
-            raise DriverError(f"device {cfg.id!r}: unknown family {cfg.family!r} "
-                              f"(installed families: {known})")
+            raise SettingsError(f"device {cfg.id!r}: unknown family {cfg.family!r} "
+                                f"(installed families: {known})")
         schema = info.schema
         assert isinstance(schema, dict)  # a settings model became its JSON Schema when accepted
         validator = self._validators.get(cfg.family)
@@ -248,21 +251,21 @@ class Registry:
 
         error = best_match(validator.iter_errors(cfg.settings))
         if error is not None:
-            raise DriverError(_explain(cfg, error))
+            raise SettingsError(_explain(cfg, error))
         from .naming import naming_device
 
         model = self._models.get(cfg.family)
-        with naming_device(cfg):  # NaN, infinities and numbers beyond any bound (plugins/settings.py)
+        with naming_device(cfg):  # NaN, infinities and numbers beyond any bound
             if model is not None:  # the model's bounds and defaults; the plugin gets plain values
                 return replace(cfg, settings=model_settings(model, cfg.settings))
-            return replace(cfg, settings=with_defaults(schema, cfg.settings))
+            return replace(cfg, settings=with_defaults(schema, cfg.settings))  # a dict: dict_schema.py
 
     def open_device(self, cfg: DeviceConfig) -> Driver:
-        """Open ``cfg`` through the plugin of its family; DriverError names the setting at fault.
+        """Open ``cfg`` through the plugin of its family; a SettingsError names the setting at fault.
 
-        A DriverError from the plugin is the device's problem and passes through;
-        any other exception is the plugin's bug: recorded against it, then
-        reported as a DriverError for this device.
+        A DriverError (a SettingsError too) from the plugin is the device's problem
+        and passes through; any other exception is the plugin's bug: recorded
+        against it, then reported as a DriverError for this device.
         """
         cfg = self.validate(cfg)
         plugin = self.families()[cfg.family].plugin

@@ -60,7 +60,8 @@ RESTART_TIMEOUT_S = 60.0
 """... and ``restart`` (closing and opening a driver: a camera, a serial port, a model to load)."""
 
 _ERRORS: dict[str, type[WottHubError]] = {
-    c.__name__: c for c in (errors.Conflict, errors.DriverError, errors.NotFound, errors.InvalidInput)}
+    c.__name__: c for c in (errors.Conflict, errors.DriverError, errors.NotFound, errors.InvalidInput,
+                            errors.ConfigError, errors.SettingsError)}
 """The error classes a worker's answer may name; anything else is a ``DriverError``."""
 
 

@@ -25,20 +25,28 @@ sets the modulus, ``thickness_mm`` (default 3), ``refine`` (mesh subdivision
 levels, default 0) and an optional inline table ``skin`` (``SkinParams``
 fields, e.g. ``{backed = true}``) the rest. Steps may then give ``force_n``
 instead of ``depth_mm`` and ``indenter = "flat"`` for a flat punch.
+
+The file is declared once (``SceneFile``, read through ``wott_hub.configspec`` like
+the hub's own config): a key it does not declare, a value of the wrong type or out
+of its bounds (NaN and infinities included) is a ``SceneError`` (a ``ConfigError``)
+naming the file, step and key: ``scene.toml: step[2].to: a slide needs an end point
+'to'``.
 """
 
 from __future__ import annotations
 
-import math
 import tomllib
 import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
+import msgspec
 import numpy as np
 
+from wott_hub.configspec import Flag, Model, bounded, read, says
+from wott_hub.errors import ConfigError
 from wott_hub.tactile.indentation import Indenter, indent, nearest_node
 from wott_hub.tactile.materials import MATERIALS
 from wott_hub.tactile.mesh import SkinMesh
@@ -46,15 +54,58 @@ from wott_hub.tactile.mesh import SkinMesh
 if TYPE_CHECKING:  # the mechanics load only for kelvin-voigt scenes
     from wott_hub.tactile.mechanics import Press, QuasiStatic
 
-__all__ = ["Scene", "SceneError", "SceneSimulator", "Step"]
-
-KINDS = ("press", "tap", "slide", "pinch")
-MODELS = ("indentation", "kelvin-voigt")
-INDENTERS = ("sphere", "flat")
+__all__ = ["Scene", "SceneError", "SceneFile", "SceneSimulator", "Step"]
 
 
-class SceneError(ValueError):
+class SceneError(ConfigError):
     """A scene file that cannot be played, with the step and field at fault."""
+
+
+# -- the file, declared once (wott_hub.configspec): its check, defaults and error text ------------
+
+Coordinate = Annotated[float, bounded("a coordinate in mm", ge=-1e4, le=1e4)]
+Point = Annotated[tuple[Coordinate, Coordinate, Coordinate], says("a point [x, y, z] in mm")]
+Time = Annotated[float, bounded("a time in seconds from the scene start", ge=0, le=1e7)]
+Ramp = Annotated[float, bounded("a number of seconds (0: at once)", ge=0, le=1e7)]
+Duration = Annotated[float, bounded("a positive number of seconds", gt=0, le=1e7)]
+Length = Annotated[float, bounded("a positive number of mm", gt=0, le=1e4)]
+Distance = Annotated[float, bounded("a distance in mm", ge=-1e4, le=1e4)]
+
+
+class StepTable(Model):
+    """A ``[[step]]`` table. ``duration_s`` and ``ramp_s`` default by ``kind`` (a tap is short)."""
+
+    kind: Literal["press", "tap", "slide", "pinch"]
+    at: Point
+    to: Point | None = None
+    start_s: Time = 0.0
+    duration_s: Duration | None = None  # 1.0, a tap 0.15
+    depth_mm: Length = 2.0
+    radius_mm: Length = 5.0
+    ramp_s: Ramp | None = None  # 0.1, a tap 0.03
+    approach_mm: Distance = 10.0
+    shear_mm: Distance = 0.0
+    force_n: Annotated[float, bounded("a force in N", ge=0, le=1e5)] | None = None
+    indenter: Literal["sphere", "flat"] = "sphere"
+
+
+class SceneTable(Model):
+    """The ``[scene]`` table; ``name`` defaults to the file's name."""
+
+    name: Annotated[str, says("a string")] | None = None
+    loop: Flag = False
+    material: Annotated[str, says("a material name (wott_hub.tactile.MATERIALS)")] = "ecoflex-00-30"
+    model: Literal["indentation", "kelvin-voigt"] = "indentation"
+    thickness_mm: Annotated[float, bounded("a positive number of mm", gt=0, le=1e3)] = 3.0
+    refine: Annotated[int, says("a number of subdivision levels", ge=0, le=3)] = 0
+    skin: Annotated[dict[str, Any], says("a table of skin parameters")] = msgspec.field(default_factory=dict)
+
+
+class SceneFile(Model):
+    """A whole scene file: ``[scene]`` and its ``[[step]]`` tables."""
+
+    scene: SceneTable = msgspec.field(default_factory=SceneTable)
+    step: list[StepTable] = msgspec.field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,77 +167,36 @@ class Scene:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<scene>") -> Scene:
-        head = data.get("scene", {})
+        """The scene of a parsed file; a ``SceneError`` names ``source``, the table and the key."""
+        f: SceneFile = read(SceneFile, data, f"{source}: ", error=SceneError)
+        head = f.scene
+        if head.model == "kelvin-voigt" and head.material not in MATERIALS:
+            raise SceneError(f"{source}: scene.material: {head.material!r} is not one of "
+                             f"{', '.join(MATERIALS)}")
         steps = []
-        for i, raw in enumerate(data.get("step", [])):
+        for i, raw in enumerate(f.step):
             where = f"{source}: step[{i}]"
-            kind = raw.get("kind")
-            if kind not in KINDS:
-                raise SceneError(f"{where}.kind: {kind!r} is not one of {', '.join(KINDS)}")
-            try:
-                at = _point(raw["at"], f"{where}.at")
-                to = _point(raw["to"], f"{where}.to") if "to" in raw else None
-                step = Step(
-                    kind=kind,
-                    at=at,
-                    to=to,
-                    start_s=float(raw.get("start_s", 0.0)),
-                    duration_s=float(raw.get("duration_s", 0.15 if kind == "tap" else 1.0)),
-                    depth_mm=float(raw.get("depth_mm", 2.0)),
-                    radius_mm=float(raw.get("radius_mm", 5.0)),
-                    ramp_s=float(raw.get("ramp_s", 0.03 if kind == "tap" else 0.1)),
-                    approach_mm=float(raw.get("approach_mm", 10.0)),
-                    shear_mm=float(raw.get("shear_mm", 0.0)),
-                    force_n=float(raw["force_n"]) if "force_n" in raw else None,
-                    indenter=str(raw.get("indenter", "sphere")),
-                )
-            except KeyError as e:
-                raise SceneError(f"{where}: missing field {e.args[0]!r}") from None
-            except (TypeError, ValueError) as e:
-                raise SceneError(f"{where}: {e}") from None
-            if kind in ("slide", "pinch") and step.to is None:
-                raise SceneError(f"{where}.to: a {kind} needs an end point 'to'")
-            for name in ("duration_s", "depth_mm", "radius_mm"):
-                v = getattr(step, name)
-                if not (np.isfinite(v) and v > 0):
-                    raise SceneError(f"{where}.{name}: must be a positive number, got {v}")
-            if step.start_s < 0 or step.ramp_s < 0:
-                raise SceneError(f"{where}: start_s and ramp_s must not be negative")
-            if step.force_n is not None and not (math.isfinite(step.force_n) and step.force_n >= 0):
-                raise SceneError(f"{where}.force_n: must be a number >= 0 N, got {step.force_n}")
-            if step.indenter not in INDENTERS:
-                raise SceneError(f"{where}.indenter: {step.indenter!r} is not one of {', '.join(INDENTERS)}")
-            steps.append(step)
-        model = str(head.get("model", "indentation"))
-        material = str(head.get("material", "ecoflex-00-30"))
-        if model not in MODELS:
-            raise SceneError(f"{source}: scene.model: {model!r} is not one of {', '.join(MODELS)}")
-        if model == "kelvin-voigt" and material not in MATERIALS:
-            raise SceneError(f"{source}: scene.material: {material!r} is not one of {', '.join(MATERIALS)}")
-        if model != "kelvin-voigt":
-            for i, st in enumerate(steps):
-                if st.force_n is not None:
-                    raise SceneError(f"{source}: step[{i}].force_n: force-controlled steps need "
-                                     "model = \"kelvin-voigt\"")
-        skin = head.get("skin", {})
-        if not isinstance(skin, dict):
-            raise SceneError(f"{source}: scene.skin: expected a table of skin parameters, got {skin!r}")
-        try:
-            thickness = float(head.get("thickness_mm", 3.0))
-            refine = int(head.get("refine", 0))
-        except (TypeError, ValueError) as e:
-            raise SceneError(f"{source}: scene: {e}") from None
-        if not (math.isfinite(thickness) and thickness > 0) or not 0 <= refine <= 3:
-            raise SceneError(f"{source}: scene: thickness_mm must be positive and refine in 0..3")
+            if raw.kind in ("slide", "pinch") and raw.to is None:
+                raise SceneError(f"{where}.to: a {raw.kind} needs an end point 'to'")
+            if raw.force_n is not None and head.model != "kelvin-voigt":
+                raise SceneError(f"{where}.force_n: force-controlled steps need model = \"kelvin-voigt\"")
+            tap = raw.kind == "tap"
+            steps.append(Step(
+                kind=raw.kind, at=np.array(raw.at), to=None if raw.to is None else np.array(raw.to),
+                start_s=raw.start_s, depth_mm=raw.depth_mm, radius_mm=raw.radius_mm,
+                duration_s=(0.15 if tap else 1.0) if raw.duration_s is None else raw.duration_s,
+                ramp_s=(0.03 if tap else 0.1) if raw.ramp_s is None else raw.ramp_s,
+                approach_mm=raw.approach_mm, shear_mm=raw.shear_mm, force_n=raw.force_n,
+                indenter=raw.indenter))
         return cls(
-            name=str(head.get("name", Path(source).stem)),
+            name=Path(source).stem if head.name is None else head.name,
             steps=tuple(steps),
-            loop=bool(head.get("loop", False)),
-            material=material,
-            model=model,
-            thickness_mm=thickness,
-            refine=refine,
-            skin=dict(skin),
+            loop=head.loop,
+            material=head.material,
+            model=head.model,
+            thickness_mm=head.thickness_mm,
+            refine=head.refine,
+            skin=dict(head.skin),
         )
 
     def _scene_time(self, t: float) -> float:
@@ -319,13 +329,6 @@ class SceneSimulator:
                 for _ in range(max(1, round(lag / self.frame_s))):
                     self.state = self.integrator.step(self.state, self.frame_s, presses)
         return self.model.to_nodes(self.state.u)[: self.mesh.n_nodes]
-
-
-def _point(value: Any, where: str) -> np.ndarray:
-    p = np.asarray(value, dtype=float)
-    if p.shape != (3,) or not np.isfinite(p).all():
-        raise SceneError(f"{where}: expected [x, y, z] in mm, got {value!r}")
-    return p
 
 
 def _on_surface(mesh: SkinMesh, point: np.ndarray) -> np.ndarray:

@@ -6,12 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wott_hub.errors import InvalidInput
+
 __all__ = ["FrameError", "TactileFrame"]
 
 _INTEGER = (int, np.integer)
 
 
-class FrameError(ValueError):
+class FrameError(InvalidInput):
     """A frame that must not enter the pipeline (wrong shape, NaN/Inf, bad time)."""
 
 

@@ -35,6 +35,8 @@ import math
 import re
 from dataclasses import dataclass
 
+from wott_hub.errors import InvalidInput
+
 __all__ = [
     "MATERIALS",
     "Material",
@@ -47,7 +49,7 @@ __all__ = [
 ]
 
 
-class MaterialError(ValueError):
+class MaterialError(InvalidInput):
     """Unknown hardness scale or a value outside it."""
 
 

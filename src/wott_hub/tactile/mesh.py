@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from wott_hub.errors import InvalidInput
+
 if TYPE_CHECKING:  # SciPy is imported where a sparse matrix is needed: processing never needs one
     import scipy.sparse as sp
 
@@ -31,7 +33,7 @@ __all__ = [
 TACLINK_DATA = Path(__file__).parent / "data" / "taclink"
 
 
-class MeshError(ValueError):
+class MeshError(InvalidInput):
     """The mesh description is impossible (bad shapes, indices out of range, NaN...)."""
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from wott_vision.driver import CameraDriver, SourceLost
+from wott_vision.driver import CameraDriver
 
 from wott_hub.plugin_api import Health
 
@@ -27,7 +27,7 @@ from .estimator import BarrelEstimate, BarrelEstimator, ReferenceNotFound
 if TYPE_CHECKING:
     from wott_vision.camera import CameraReader
 
-__all__ = ["BarrelDriver", "CameraPair", "SourceLost"]
+__all__ = ["BarrelDriver", "CameraPair"]
 
 
 class CameraPair:

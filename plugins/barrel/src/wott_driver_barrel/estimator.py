@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from wott_hub.plugin_api import InvalidInput
+
 from .geometry import BarrelLayout, FisheyeCamera
 from .model import DisplacementModel
 
@@ -50,8 +52,8 @@ MIN_AVAILABLE = 0.5  # of a camera's markers matched at rest, below which the fr
 MAX_DISPLACEMENT_MM = 25.0  # physical bound: half the rim's radius (36 mm); beyond, the model extrapolates
 
 
-class ReferenceNotFound(RuntimeError):
-    """The frame does not show the marker grid at rest (yet)."""
+class ReferenceNotFound(InvalidInput):
+    """The frame does not show the marker grid at rest (yet): it cannot be the rest reference."""
 
 
 @dataclass

@@ -20,8 +20,8 @@ from wott_vision.settings import backoff, check_material, recorded_rate, section
 from wott_hub.plugin_api import (
     MATERIALS,
     DeviceDescription,
-    DriverError,
     Meta,
+    SettingsError,
     SettingsTable,
     SkinShape,
     model_fields,
@@ -128,7 +128,7 @@ def build_layout(cameras: Mapping[str, Any] | CamerasTable | None = None) -> Bar
         cams = default_cameras(260.0, offset_mm=c.offset_mm, f_px=c.f_px, width=c.width, height=c.height)
         return BarrelLayout(MarkerLayout(taclink_barrel()), cams)
     except ValueError as e:
-        raise DriverError(f"cameras: {e}") from None
+        raise SettingsError(f"cameras: {e}") from None
 
 
 def describe(device_id: str, s: BarrelSettings, layout: BarrelLayout) -> DeviceDescription:
@@ -144,7 +144,7 @@ def describe(device_id: str, s: BarrelSettings, layout: BarrelLayout) -> DeviceD
 
 def open_barrel(device_id: str, settings: Mapping[str, Any], *,
                 max_frames: int | None = None) -> BarrelDriver:
-    """A ``BarrelDriver`` for these settings; raises ``DriverError`` naming the setting at fault."""
+    """A ``BarrelDriver`` for these settings; raises ``SettingsError`` naming the setting at fault."""
     from .driver import BarrelDriver, CameraPair
     from .estimator import BarrelEstimator
     from .model import DisplacementModel, default_model_path
@@ -161,7 +161,7 @@ def open_barrel(device_id: str, settings: Mapping[str, Any], *,
         estimator = BarrelEstimator(layout, model, reference=s.reference,
                                     detector=model_fields(s.detector), tracker=model_fields(s.tracker))
     except ValueError as e:
-        raise DriverError(str(e)) from None
+        raise SettingsError(str(e)) from None
     source = s.source
     if source == "sim":
         render = section(RenderSettings, s.render, "render")
@@ -169,7 +169,7 @@ def open_barrel(device_id: str, settings: Mapping[str, Any], *,
                                              lambda scene: BarrelSimulator(layout, scene, render))
     else:
         if not (isinstance(source, list | tuple) and len(source) == 2):
-            raise DriverError(f"source: \"sim\" or [bottom, top] camera sources, got {source!r}")
+            raise SettingsError(f"source: \"sim\" or [bottom, top] camera sources, got {source!r}")
         specs = tuple(source)
         fps, realtime = recorded_rate(settings, s, specs[0])
 

@@ -14,11 +14,11 @@ their neighbours) or a displacement was clamped to the gel's thickness.
 from __future__ import annotations
 
 import numpy as np
-from wott_vision.driver import CameraDriver, FrameReader, SourceLost
+from wott_vision.driver import CameraDriver, FrameReader
 
 from .estimator import PadEstimate, PadEstimator, ReferenceNotFound
 
-__all__ = ["FlatPadDriver", "FrameReader", "SourceLost"]
+__all__ = ["FlatPadDriver", "FrameReader"]
 
 
 class FlatPadDriver(CameraDriver):

@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, TypedDict
 import numpy as np
 from wott_vision.markers import as_gray
 
+from wott_hub.plugin_api import InvalidInput
+
 from .depth import DepthModel, MarkerPhotometry, ParallaxSolver, fill_lost
 from .geometry import PadLayout
 
@@ -38,8 +40,8 @@ __all__ = ["MIN_AVAILABLE", "PadEstimate", "PadEstimator", "ReferenceNotFound", 
 MIN_AVAILABLE = 0.5  # fewer markers matched at rest: the pad is touched or the grid is wrong
 
 
-class ReferenceNotFound(ValueError):
-    """The image does not show the configured marker grid at rest (yet)."""
+class ReferenceNotFound(InvalidInput):
+    """The image does not show the configured marker grid at rest (yet): it cannot be the rest reference."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -18,8 +18,8 @@ from wott_hub.plugin_api import (
     MATERIALS,
     CoordinateFrame,
     DeviceDescription,
-    DriverError,
     Meta,
+    SettingsError,
     SettingsTable,
     SkinShape,
     model_fields,
@@ -117,7 +117,7 @@ def layout_from(s: PadSettings) -> PadLayout:
         optics = PadOptics(gel_mm=s.thickness_mm, **o)
         return PadLayout(s.rows, s.cols, s.pitch_mm, s.marker_radius_mm, optics)
     except (TypeError, ValueError) as e:
-        raise DriverError(f"flat-vision settings: {e}") from None
+        raise SettingsError(f"flat-vision settings: {e}") from None
 
 
 def describe(device_id: str, s: PadSettings, layout: PadLayout) -> DeviceDescription:
@@ -180,4 +180,4 @@ def _depth_model(spec: str, layout: PadLayout) -> DepthModel:
     try:
         return DepthModel.load(spec)
     except ValueError as e:
-        raise DriverError(f"depth_model: {e}") from None
+        raise SettingsError(f"depth_model: {e}") from None

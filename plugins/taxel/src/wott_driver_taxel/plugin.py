@@ -93,9 +93,9 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
     from wott_hub.plugin_api import (
         CoordinateFrame,
         DeviceDescription,
-        DriverError,
         Scene,
         SceneError,
+        SettingsError,
         SkinShape,
         backoff,
         flat_pad,
@@ -111,14 +111,14 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
         s = read_settings(TaxelSettings, config.settings)
         rows, cols = s.rows, s.cols
         if s.port is None and not s.simulate:
-            raise DriverError("setting 'port': required setting is missing")
+            raise SettingsError("setting 'port': required setting is missing")
         if s.material not in MATERIALS:
-            raise DriverError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
+            raise SettingsError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
         if rows * cols > MAX_VALUES:
-            raise DriverError(f"setting 'rows': {rows} x {cols} taxels do not fit a frame "
-                              f"(max {MAX_VALUES} values)")
+            raise SettingsError(f"setting 'rows': {rows} x {cols} taxels do not fit a frame "
+                                f"(max {MAX_VALUES} values)")
         if s.backoff_cap_s < s.backoff_initial_s:
-            raise DriverError("setting 'backoff_cap_s': must not be below backoff_initial_s")
+            raise SettingsError("setting 'backoff_cap_s': must not be below backoff_initial_s")
         reconnect = backoff(s)
     pitch, thickness = s.pitch_mm, s.thickness_mm
     material = MATERIALS[s.material]
@@ -142,7 +142,7 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
                     scene = Scene.from_dict(tomllib.loads(demo_scene_text()),
                                             source=f"wott_driver_taxel/scenes/{DEMO_SCENE}")
             except SceneError as e:
-                raise DriverError(f"setting 'scene': {e}") from None
+                raise SettingsError(f"setting 'scene': {e}") from None
         simulator = TaxelSimulator(scene, mesh, (rows, cols), compliance, rate_hz=s.rate_hz,
                                    protocol=s.protocol)
         desc = replace(desc, description=desc.description + " (simulated)")

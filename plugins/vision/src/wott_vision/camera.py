@@ -1,8 +1,9 @@
 """Camera sources: an OpenCV ``VideoCapture`` on a device index, a file or a URL.
 
-``open_source`` fails loudly (``CameraError`` with the reason) instead of
-returning a capture that silently reads nothing, so a driver can report *why*
-it is disconnected. A source that stops delivering (unplugged device, a video
+``open_source`` fails loudly (``CameraError`` with the reason: a ``DriverError``,
+and an ``OSError`` as it was before the hub's error tree) instead of returning a
+capture that silently reads nothing, so a driver can report *why* it is
+disconnected. A source that stops delivering (unplugged device, a video
 file at its end, a dropped stream) shows as ``read()`` returning
 ``(False, None)``; ``CameraReader.failure`` then says which, and the driver
 reopens it with backoff.
@@ -26,10 +27,12 @@ from typing import Any
 
 import numpy as np
 
+from wott_hub.plugin_api import DriverError
+
 __all__ = ["CameraError", "CameraReader", "open_source", "parse_spec"]
 
 
-class CameraError(OSError):
+class CameraError(DriverError, OSError):
     """A camera source that cannot be opened or has stopped delivering frames."""
 
 

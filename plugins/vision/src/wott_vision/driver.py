@@ -64,8 +64,7 @@ from wott_hub.plugin_api import (
     Tareable,
 )
 
-__all__ = ["BELOW_THRESHOLD_FLOOR", "LOST_FRACTION_DEGRADED", "CameraDriver", "FrameReader", "SourceEnded",
-           "SourceLost"]
+__all__ = ["BELOW_THRESHOLD_FLOOR", "LOST_FRACTION_DEGRADED", "CameraDriver", "FrameReader"]
 
 LOST_FRACTION_DEGRADED = 0.1
 BELOW_THRESHOLD_FLOOR = 0.75  # x epsilon: above the image-noise floor at rest of both families
@@ -89,12 +88,13 @@ class Estimator(Protocol):
     def reset_tracking(self) -> None: ...
 
 
-class SourceLost(RuntimeError):
-    """The source gave no frame; the reason is the message."""
+class _SourceLost(RuntimeError):
+    """The source gave no frame; the reason is the message (the health reason: it never leaves
+    ``frames()``)."""
 
 
-class SourceEnded(Exception):
-    """A finite simulated source played to its end: the device is done, not lost."""
+class _SourceEnded(Exception):
+    """A finite simulated source played to its end: the device is done, not lost (``frames()`` ends)."""
 
 
 class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavailableNodes):
@@ -207,7 +207,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             opened = getattr(reader, "isOpened", None)
             if opened is not None and not opened():
                 _release(reader)
-                raise SourceLost(f"cannot open {self.source_name}")
+                raise _SourceLost(f"cannot open {self.source_name}")
             self._reader = reader
             if getattr(reader, "recorded", False):  # continue after the last frame, on the hub clock
                 self._base_ns = max(self._wall0_ns + time.monotonic_ns() - self._mono0_ns,
@@ -226,14 +226,14 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         with self._lock:
             reader = self._reader
             if reader is None:
-                raise SourceLost(f"{self.source_name} is closed")
+                raise _SourceLost(f"{self.source_name} is closed")
             ok, images = reader.read()
             t_ns = self._timestamp(reader)
             truth = getattr(reader, "truth", None)
         if not ok or images is None:
             if getattr(reader, "ended", False):
-                raise SourceEnded
-            raise SourceLost(getattr(reader, "failure", "")
+                raise _SourceEnded
+            raise _SourceLost(getattr(reader, "failure", "")
                              or f"{self.source_name} returned no frame (unplugged, or end of stream)")
         self._last_t_ns = max(self._last_t_ns, t_ns)
         request, self._rest_request = self._rest_request, None
@@ -312,7 +312,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                         continue
                 try:
                     frame = await asyncio.to_thread(self._step)
-                except SourceEnded:
+                except _SourceEnded:
                     return
                 except Exception as e:  # a driver never raises out of frames() for a transient fault
                     if self._closed.is_set():  # close() released the source under the read: not a fault
@@ -349,10 +349,10 @@ def _release(reader: Any) -> None:
 def _reason(e: BaseException, context: str) -> str:
     """The health reason for a failure: the source's own words, or the failure in its context.
 
-    ``SourceLost`` and ``OSError`` (``CameraError``) messages are written to be read and name
+    ``_SourceLost`` and ``OSError`` (``CameraError``) messages are written to be read and name
     the source already; anything else (a bug, a model error) needs to say where it happened.
     """
     text = str(e).strip()
-    if text and isinstance(e, SourceLost | OSError):
+    if text and isinstance(e, _SourceLost | OSError):
         return text
     return f"{context}: {text or type(e).__name__}"

@@ -6,7 +6,7 @@ defaults; reading those is the same code for both. A family reads its settings
 with ``read_settings(ItsModel, settings)`` (every bound checked, defaults filled
 in) and hands the typed result to these helpers. ``backoff`` is not
 camera-specific: it lives in ``wott_hub.plugin_api`` and is re-exported here.
-Errors are ``DriverError``s naming the setting at fault (the plugin hook adds
+Errors are ``SettingsError``s naming the setting at fault (the plugin hook adds
 the device and family).
 Nothing here imports cv2: the reader a family makes is opened by its driver.
 """
@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-from wott_hub.plugin_api import MATERIALS, DriverError, Scene, SceneError, backoff, model_fields
+from wott_hub.plugin_api import MATERIALS, Scene, SceneError, SettingsError, backoff, model_fields
 
 from .driver import FrameReader
 from .simulated import SimulatedSource, Simulator
@@ -41,12 +41,12 @@ def section(factory: Callable[..., _T], table: Any, key: str) -> _T:
     try:
         return factory(**model_fields(table))
     except (TypeError, ValueError) as e:
-        raise DriverError(f"{key}: {e}") from None
+        raise SettingsError(f"{key}: {e}") from None
 
 
 def check_material(s: Any) -> None:
     if s.material not in MATERIALS:
-        raise DriverError(f"material: {s.material!r} is not one of {', '.join(sorted(MATERIALS))}")
+        raise SettingsError(f"material: {s.material!r} is not one of {', '.join(sorted(MATERIALS))}")
 
 
 def simulator_source(
@@ -61,10 +61,10 @@ def simulator_source(
     try:
         scene = Scene.load(s.scene or demo_scene)
     except SceneError as e:
-        raise DriverError(f"scene: {e}") from None
+        raise SettingsError(f"scene: {e}") from None
     fps, realtime = float(s.fps), bool(s.realtime)
     if not fps > 0:
-        raise DriverError(f"fps: must be positive, got {fps}")
+        raise SettingsError(f"fps: must be positive, got {fps}")
 
     def open_source() -> SimulatedSource:
         return SimulatedSource(make_simulator(scene), fps, realtime=realtime)

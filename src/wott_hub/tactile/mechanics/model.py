@@ -23,6 +23,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from wott_hub.errors import InvalidInput
+
 from ..materials import Material
 from ..mesh import SkinMesh
 from .assembly import assemble_blocks, edge_blocks, edge_set, foundation_blocks
@@ -40,7 +42,7 @@ __all__ = [
 MASS_FLOOR = 1e-3  # lightest node, in median node masses: a zero-area node still has inertia
 
 
-class MechanicsError(ValueError):
+class MechanicsError(InvalidInput):
     """An input the skin model cannot work with (bad parameters, singular skin, NaN...)."""
 
 
