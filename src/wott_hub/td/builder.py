@@ -11,6 +11,7 @@ from typing import Any
 from wott_hub.tactile.device import DeviceDescription
 
 from .actions import declared_actions
+from .defaults import state_defaults
 from .forms import FormFactory, FormLayout
 from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
 
@@ -42,7 +43,8 @@ def build_tactile_td(
     binding supplies its own ``forms``. ``context_url`` is where the Tactile
     JSON-LD context is served (by default the hub at ``base``). TD 1.1 allows
     only prefix maps inline, so the ``tac`` prefix is also given inline for
-    processors that do not dereference.
+    processors that do not dereference. The TD 1.1 defaults a client decides by are stated
+    (``wott_hub.td.defaults``).
     """
     layout = FormLayout(base.rstrip("/"))
     forms = forms or layout.factory(desc.id)
@@ -78,7 +80,7 @@ def build_tactile_td(
     }
     if declared:
         td["actions"] = declared
-    return td
+    return state_defaults(td)
 
 
 def static_property_values(desc: DeviceDescription) -> dict[str, Any]:
