@@ -159,8 +159,10 @@ class _LeanSSE(_Lean):
             raw = raw[eol + 4 + size:]
         *messages, self.text = b"".join(body).split(b"\n\n")
         for m in messages:
+            if m.startswith(b"retry: "):  # the stream's first line, part of its first message
+                m = m.partition(b"\n")[2]
             if not m.startswith(b"id: "):
-                continue  # a comment (": stream open", ": ping")
+                continue  # a comment (": ping")
             head, _, data = m.partition(b"\ndata: ")
             stamp = json.loads(data).get("timeStamp", 0)
             self.got.append((self.i, int(head[4:]), t, now_ns(), stamp))

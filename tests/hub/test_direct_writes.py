@@ -156,7 +156,7 @@ def test_sse_records_reach_the_socket_framed_as_the_http_version_says(hub, versi
             return out
 
         sent = hub.call(publish)
-        want = b": stream open\n\n" + b"".join(f"id: {seq}\ndata: {data}\n\n".encode() for seq, data in sent)
+        want = b"retry: 1000\n" + b"".join(f"id: {seq}\ndata: {data}\n\n".encode() for seq, data in sent)
         if version == "HTTP/1.1":
             body = _read_until(sock, buf, lambda b: len(_dechunk(b)[0]) >= len(want))
             assert _dechunk(body) == (want, b"")

@@ -4,7 +4,8 @@ One hub for the package: the demo fleet (each installed plugin's simulated
 devices), history on, its TD directory, no mDNS (other hubs on this machine
 must not join the fleet under test). The clients are the ones users have:
 node-wot 0.9.2 (npm, pinned by package-lock.json), wotpy 0.18 (the project's
-own dependency) and Debian's chromium. A missing client fails the suite, it
+own dependency) and Debian's chromium; the TD validators are the Thingweb
+playground's npm packages (pinned there too) and pyld. A missing client fails the suite, it
 never skips: ``.ci/run`` installs node and runs ``npm ci`` here; without
 node_modules the fixture runs ``npm ci`` itself.
 """
@@ -26,7 +27,8 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 CHROMIUM = "/usr/bin/chromium"
-NODE_WOT = ("@node-wot/core", "@node-wot/binding-http")
+# node-wot and the Thingweb playground's validators, at the versions package.json pins
+NODE_PACKAGES: dict[str, str] = json.loads((HERE / "package.json").read_text())["dependencies"]
 
 
 @pytest.fixture(scope="package")
@@ -75,8 +77,11 @@ _RETIRING: set[asyncio.Future] = set()  # strong references to the retiring task
 
 def _tare_every_device(url: str) -> None:
     """Invoke ``tare`` on every device that declares it, over HTTP by its TD's form: each answers
-    with a ``deviceAction`` event, which a steady fleet never emits otherwise."""
+    with a ``deviceAction`` event, which a steady fleet never emits otherwise. Not the scripted
+    ``late-`` devices: they retire by themselves, possibly between the listing and the tare."""
     for thing_id in httpx.get(f"{url}/wot").json():
+        if thing_id.startswith("late-"):
+            continue
         td = httpx.get(f"{url}/wot/{thing_id}").json()
         tare = td.get("actions", {}).get("tare")
         if tare is not None:
@@ -95,6 +100,19 @@ def scripted_press(demo_hub):
         _tare_every_device(demo_hub.url)
 
     return press
+
+
+@pytest.fixture(scope="package")
+def tare_every_device(demo_hub):
+    """tare_every_device(): every device tared now (``_tare_every_device``), and recorded: returns once
+    the hub's history has nothing queued, so that a replay started next holds the ``deviceAction``."""
+
+    def tare() -> None:
+        _tare_every_device(demo_hub.url)
+        poll(lambda: httpx.get(f"{demo_hub.url}/wot/hub/properties/eventCounters").json()["history"].get(
+            "queued", 0) == 0, 10, "the tares recorded")
+
+    return tare
 
 
 def poll(predicate, timeout: float, what: str) -> None:
@@ -123,12 +141,13 @@ def fleet(demo_hub):
 
 @pytest.fixture(scope="session")
 def node_wot() -> list[str]:
-    """The command running node with node-wot 0.9.2 installed beside it (tests/interop/node_modules)."""
+    """The command running node with node-wot 0.9.2 and the playground's validators installed beside
+    it (tests/interop/node_modules, from package-lock.json)."""
     node = shutil.which("node") or shutil.which("nodejs")
     if node is None:
         pytest.fail("node not found: the interop tests drive node-wot (apt-get install nodejs npm; "
                     ".ci/run does it)")
-    if not all((HERE / "node_modules" / pkg / "package.json").exists() for pkg in NODE_WOT):
+    if not all((HERE / "node_modules" / pkg / "package.json").exists() for pkg in NODE_PACKAGES):
         npm = shutil.which("npm")
         if npm is None:
             pytest.fail("node-wot is not installed in tests/interop and npm is missing (apt-get install npm)")
@@ -136,9 +155,9 @@ def node_wot() -> list[str]:
                               text=True, timeout=300)
         if done.returncode != 0:
             pytest.fail(f"npm ci in tests/interop failed:\n{done.stderr[-2000:]}")
-    for pkg in NODE_WOT:
+    for pkg, pinned in NODE_PACKAGES.items():
         version = json.loads((HERE / "node_modules" / pkg / "package.json").read_text())["version"]
-        assert version == "0.9.2", f"{pkg} {version} installed, the lockfile pins 0.9.2"
+        assert version == pinned, f"{pkg} {version} installed, the lockfile pins {pinned}"
     return [node]
 
 

@@ -26,8 +26,9 @@ def _served(url: str) -> dict[str, dict]:
 
 
 @pytest.fixture(scope="module")
-def session(fleet, scripted_press) -> dict:
-    """One wotpy client session against the hub; what it got, for the tests to look at."""
+def session(fleet, scripted_press, tare_every_device) -> dict:
+    """One wotpy client session against the hub; what it got, for the tests to look at. The replay's
+    range ends with a tare, whatever ran before this module (its deviceAction comes 10 s in)."""
     from wotpy.wot.servient import Servient
     from wotpy.wot.wot import WoT
 
@@ -35,7 +36,9 @@ def session(fleet, scripted_press) -> dict:
         wot = WoT(servient=Servient(catalogue_port=None))
         hub = await wot.consume_from_url(f"{fleet.url}/wot/hub")
         device = next(d["id"] for d in await hub.read_property("devices") if d["recorded"])
-        replay = await hub.invoke_action("replay", {"device": device, "from": "-60s", "loop": True})
+        await asyncio.to_thread(tare_every_device)
+        replay = await hub.invoke_action("replay", {"device": device, "from": "-20s", "speed": 2,
+                                                    "loop": True})
         tds = await asyncio.to_thread(_served, fleet.url)  # the replay Thing among them
         out = {"device": device, "replay": replay, "tds": tds, "reads": {}, "protocols": {}, "got": {}}
         reads, protocols, got = out["reads"], out["protocols"], out["got"]

@@ -4,8 +4,9 @@
 // Fetches the TD with the token (WoT.requestThingDescription sends no credentials: a
 // client fetching a protected TD does it itself, like any other protected resource),
 // gives node-wot the token for the Thing's id (servient.addCredentials), consumes the
-// TD, reads a property and subscribes to events over the TD's SSE forms. Prints one
-// JSON line: {"security", "read", "events", "errors"}.
+// TD as it is served, reads a property and subscribes to events: over the long-poll forms a
+// secured TD lists first, whose requests node-wot signs with the header (its SSE client sends
+// no credential; docs/security.md). Prints one JSON line: {"security", "read", "events", "errors"}.
 
 import core from "@node-wot/core";
 import http from "@node-wot/binding-http";
@@ -13,6 +14,7 @@ import http from "@node-wot/binding-http";
 const [url, token, seconds] = [process.argv[2], process.argv[3], Number(process.argv[4] || 8)];
 const text = (e) => (e instanceof Error ? e.message : String(e)).slice(0, 300);
 const out = {security: null, read: null, events: {}, errors: []};
+let stopping = false;
 
 const servient = new core.Servient();
 servient.addClientFactory(new http.HttpClientFactory());
@@ -23,18 +25,6 @@ try {
   if (!r.ok) throw new Error(`TD: HTTP ${r.status}`);
   const td = await r.json();
   out.security = td.security;
-  // node-wot 0.9.2 opens SSE with `new EventSource(form.href)`: no credentials at all. The TD lets
-  // a stream form take the token as the access_token query parameter (bearer_query_sc), so that is
-  // what this client does for those forms; everything else gets the Authorization header from node-wot.
-  for (const aff of [...Object.values(td.events || {}), ...Object.values(td.properties || {})]) {
-    for (const form of aff.forms || []) {
-      if (form.subprotocol === "sse" && (form.security || []).includes("bearer_either_sc")) {
-        const u = new URL(form.href);
-        u.searchParams.set(td.securityDefinitions.bearer_query_sc.name, token);
-        form.href = u.href;
-      }
-    }
-  }
   servient.addCredentials({[td.id]: {token}});
   const thing = await WoT.consume(td);
   try {
@@ -47,12 +37,13 @@ try {
     out.events[name] = 0;
     try {
       subs.push(await thing.subscribeEvent(name, async (d) => { await d.value(); out.events[name] += 1; },
-                                           (e) => out.errors.push(`${name}: ${text(e)}`)));
+                                           (e) => stopping || out.errors.push(`${name}: ${text(e)}`)));
     } catch (e) {
       out.errors.push(`subscribe ${name}: ${text(e)}`);
     }
   }
   await new Promise((res) => setTimeout(res, seconds * 1000));
+  stopping = true; // stopping a long poll aborts its pending request, which node-wot reports as an error
   for (const s of subs) await s.stop().catch(() => {});
 } catch (e) {
   out.errors.push(text(e));

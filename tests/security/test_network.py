@@ -239,7 +239,7 @@ def test_websocket_and_sse_take_the_token_as_a_query_parameter(netns, hub, token
     ])
     assert got["ws"]["status"] == 101 and '"pad"' in got["ws"]["body"]
     assert "invoke_action needs a token with scope control" in got["ws invoke"]["body"]
-    assert got["sse"]["status"] == 200 and got["sse"]["body"].startswith(": stream open")
+    assert got["sse"]["status"] == 200 and got["sse"]["body"].startswith("retry: 1000\n")
 
 
 def test_cors_answers_only_the_configured_origins_off_loopback(netns, hub, tokens):

@@ -2,7 +2,9 @@
 
 The TD declares ``bearer`` (header); node-wot is given the token for the Thing's id
 (``servient.addCredentials``), as its documentation says, and must read a property
-and receive events over the TD's SSE forms. Without the token it gets nothing. The
+and receive events, with the TD as it is served: over the long-poll forms a secured TD lists
+before its SSE forms (node-wot's SSE client sends no credential; tests/interop/
+test_nodewot_credentials.py has the measurements). Without the token it gets nothing. The
 node packages are the ones tests/interop pins (``npm ci`` there; ``.ci/run`` does it).
 """
 

@@ -103,7 +103,13 @@ def test_open_mode_tds_declare_nosec_and_enforced_ones_bearer():
     secured = AccessPolicy(enforced=True).secure_td(td)
     assert secured["security"] == ["bearer_sc"]
     either = ["bearer_either_sc"]
-    assert [f.get("security") for f in secured["properties"]["p"]["forms"]] == [either, None, either]
+    got = secured["properties"]["p"]["forms"]
+    assert [f.get("security") for f in got] == [either, None, None, either]
+    # before the SSE form, the same stream as a long poll under the Thing's header scheme: node-wot
+    # 0.9.2 subscribes with it (tests/interop/test_nodewot_credentials.py)
+    assert got[2] == {"href": forms[2]["href"], "op": [], "subprotocol": "longpoll",
+                      "contentType": "application/json"}
+    assert AccessPolicy(enforced=True).secure_td(secured) == secured  # once only
 
 
 def test_cli_create_list_revoke(tmp_path):

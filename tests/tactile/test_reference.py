@@ -59,7 +59,10 @@ def reference_contacts(mesh: SkinMesh, deformed, intensity, d, stiffness, min_no
 
 
 def norm3(v) -> float:
-    return math.sqrt(float(v @ v))
+    # in order, no fused multiply-add, as the implementation sums: ``v @ v`` goes to the BLAS, whose
+    # kernel (FMA or not) depends on the CPU, and the last bit with it
+    x, y, z = v.tolist()
+    return math.sqrt(x * x + y * y + z * z)
 
 
 class ReferenceActions:

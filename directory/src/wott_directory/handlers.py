@@ -48,6 +48,13 @@ log = logging.getLogger("wott_directory.http")
 TD_TYPE = "application/td+json"
 LD_TYPE = "application/ld+json"
 JSON_TYPE = "application/json"
+TEXT_TYPE = "text/plain"
+"""What the directory's TD declares for the empty bodies of 201 and 204 answers (selftd.py)."""
+SSE_RETRY_MS = 1000
+"""Every event stream starts with this ``retry:`` line, at once: a field, not a comment line (some older
+clients took one for an empty message and lost the first), and without a blank line after it (it
+belongs to the first event: httpx-sse dispatches any block holding a ``retry:``, empty or not). An
+``EventSource`` reconnects after that long, with ``Last-Event-ID``."""
 TD_INPUT_TYPES = {TD_TYPE, JSON_TYPE, LD_TYPE}
 MERGE_PATCH_TYPE = "application/merge-patch+json"
 
@@ -106,6 +113,26 @@ class BaseHandler(RequestHandler):
         self.set_status(status)
         self.set_header("Content-Type", content_type)
         self.finish(_dumps(doc))
+
+    _keep_content_type = False
+
+    def finish_empty(self, status: int) -> None:
+        """A 201 or 204 with no body, as the TD's ``response`` declares it: ``text/plain`` (not
+        tornado's default ``text/html``, or no type at all on a 204). node-wot 0.9.2 checks an
+        action's answer against the declared type and throws, after the write succeeded, on any
+        other; with no Content-Type it assumes application/json."""
+        self.set_status(status)
+        self.set_header("Content-Type", TEXT_TYPE)
+        self._keep_content_type = True
+        self.finish()
+
+    def _clear_representation_headers(self) -> None:
+        # tornado drops Content-Type from a 204 (and 304); finish_empty's answer keeps it
+        if self._keep_content_type:
+            self.clear_header("Content-Encoding")
+            self.clear_header("Content-Language")
+        else:
+            super()._clear_representation_headers()
 
     def write_error(self, status_code: int, **kwargs: Any) -> None:
         exc = kwargs.get("exc_info", (None, None, None))[1]
@@ -271,9 +298,8 @@ class ThingsHandler(_BodyHandler):
     async def post(self) -> None:
         td = self.json_body(TD_INPUT_TYPES, required=False)
         thing_id = await self.directory.create_anonymous(td, remote=True)
-        self.set_status(201)
         self.set_header("Location", f"{self.conf.base_url}things/{quote(thing_id, safe=':')}")
-        self.finish()
+        self.finish_empty(201)
 
 
 class ThingHandler(_BodyHandler):
@@ -290,20 +316,17 @@ class ThingHandler(_BodyHandler):
     async def put(self, thing_id: str) -> None:
         td = self.json_body(TD_INPUT_TYPES, required=False)
         created = await self.directory.put(thing_id, td, remote=True)
-        self.set_status(201 if created else 204)
-        self.finish()
+        self.finish_empty(201 if created else 204)
 
     async def patch(self, thing_id: str) -> None:
         patch = self.json_body({MERGE_PATCH_TYPE}, required=True)
         await self.directory.patch(thing_id, patch, remote=True)
-        self.set_status(204)
-        self.finish()
+        self.finish_empty(204)
 
     async def delete(self, thing_id: str) -> None:
         self.check_refused()
         await self.directory.delete(thing_id, remote=True)
-        self.set_status(204)
-        self.finish()
+        self.finish_empty(204)
 
 
 class JSONPathHandler(BaseHandler):
@@ -395,7 +418,7 @@ class EventsHandler(BaseHandler):
         self._sub = sub
         self._keepalive = asyncio.get_running_loop().call_later(self.conf.sse_keepalive, self._ping)
         try:
-            self.write(b": wott-directory events\n\n")
+            self.write(f"retry: {SSE_RETRY_MS}\n".encode())
             for old in missed:
                 self.write(old.sse(diff))
             await self.flush()

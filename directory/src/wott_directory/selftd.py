@@ -2,7 +2,9 @@
 
 What the TM leaves optional we declare only if we serve it: everything but the
 XPath and SPARQL searches. Every form states its ``op`` and
-``htv:methodName`` (clients pick forms by them).
+``htv:methodName`` (clients pick forms by them), and the TD states the TD 1.1
+defaults a client decides by (``readOnly``/``writeOnly``/``observable``,
+``safe``/``idempotent``, each form's ``contentType``, ``success`` of error responses).
 
 Its security says exactly what the server enforces, and defines no scheme no
 form uses: standalone, reads are open (``nosec``) unless ``protect_reads``,
@@ -74,10 +76,39 @@ def directory_td(settings: DirectorySettings, version: str = "0.1.0",
                 if isinstance(response, dict) and "contentType" not in response:
                     # TD 1.1 requires it; these responses (201/204) have an empty body
                     response["contentType"] = "text/plain"
+                _state_form_defaults(kind, form)
+    _state_affordance_defaults(td)
     # wotpy fetches a form's href as it is (no base, no URI template): a plain absolute form first
     forms = td["properties"]["things"]["forms"]
     forms.insert(0, {**copy.deepcopy(forms[0]), "href": urljoin(settings.base_url, "things")})
     return td
+
+
+# HTTP's idempotent methods (RFC 9110 9.2.2): repeating the request leaves the directory as once
+_IDEMPOTENT = ("createThing", "updateThing", "deleteThing", "retrieveThing", "searchJSONPath")
+
+
+def _state_form_defaults(kind: str, form: dict[str, Any]) -> None:
+    """TD 1.1 defaults the W3C playground's full schema asks for, stated (the hub's TDs do the same,
+    wott_hub.td.defaults): a form's ``contentType`` is what its request carries, or for a request
+    without a body (GET, DELETE) what it answers; an event's is its data's (``application/json``;
+    ``response`` says the stream is ``text/event-stream``); an error response is no success."""
+    response = form.get("response")
+    if kind == "events":
+        form.setdefault("contentType", "application/json")
+    elif isinstance(response, dict) and "contentType" in response:
+        form.setdefault("contentType", response["contentType"])
+    for extra in form.get("additionalResponses") or ():
+        extra.setdefault("success", False)
+
+
+def _state_affordance_defaults(td: dict[str, Any]) -> None:
+    for prop in td["properties"].values():
+        prop.setdefault("writeOnly", False)
+        prop.setdefault("observable", False)
+    for name, action in td["actions"].items():
+        action.setdefault("safe", False)
+        action.setdefault("idempotent", name in _IDEMPOTENT)
 
 
 def _standalone_security(settings: DirectorySettings) -> dict[str, Any]:

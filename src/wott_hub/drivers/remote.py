@@ -337,7 +337,8 @@ class RemoteWoTDriver(Driver, Retargetable):
                         async for sse in source.aiter_sse():
                             if sse.id:
                                 self.last_event_id = sse.id
-                            if sse.event not in (EVENT, "message", ""):
+                            # no data: httpx-sse hands a keep-alive or retry: block on as an empty message
+                            if sse.event not in (EVENT, "message", "") or not sse.data:
                                 continue
                             frame = self._packet_frame(sse.data)
                             if frame is not None:

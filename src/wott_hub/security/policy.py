@@ -20,6 +20,7 @@ and fetches everything else with it).
 
 from __future__ import annotations
 
+import copy
 import re
 import secrets
 from collections.abc import Iterator, Mapping
@@ -170,6 +171,7 @@ class AccessPolicy:
                 if (isinstance(href, str) and href.startswith(("ws://", "wss://"))) or (
                         form.get("subprotocol") == "sse"):
                     form["security"] = [BEARER_EITHER]
+            _add_long_poll_forms(td)
         return td
 
 
@@ -178,6 +180,37 @@ def allows(request: Any, scope: Scope) -> bool:
     socket opened with a ``read`` token may not write or invoke over it. No gate: allowed."""
     principal = getattr(request, "wott_principal", None)
     return principal is None or principal.scope.grants(scope)
+
+
+def _add_long_poll_forms(td: dict[str, Any]) -> None:
+    """Before each SSE form of an event or observable property, a ``longpoll`` form of the same
+    stream under the Thing's ``security`` (the header): the form node-wot 0.9.2 subscribes with.
+
+    node-wot opens SSE with ``new EventSource(href)``, which sends no credential at all; it picks
+    the first form listing the operation, sets its client's credentials once from that form's
+    ``security`` (a ``combo`` it cannot apply: no credential for any later request either; any
+    form-level scheme: "No Bearer credentials for Thing"), and signs a long poll's requests with
+    the header like a read. So a secured TD offers the long poll first, without form-level
+    security and without ``htv:methodName``: node-wot's handshake is a HEAD only then (with GET
+    declared it is a GET, which waits for a record and times out after 1 s). Measured in
+    tests/interop/test_nodewot_credentials.py; clients choosing forms by ``subprotocol: "sse"``
+    (browsers, wott-client, the twin, wot-remote) are unaffected. A long poll answers one record
+    per request and node-wot sends no ``Last-Event-ID``: records between two polls are not
+    delivered (docs/security.md)."""
+    for kind in ("properties", "events"):
+        for aff in (td.get(kind) or {}).values():
+            forms = aff.get("forms") if isinstance(aff, dict) else None
+            if not isinstance(forms, list) or any(
+                    isinstance(f, dict) and f.get("subprotocol") == "longpoll" for f in forms):
+                continue
+            at = next((i for i, f in enumerate(forms) if isinstance(f, dict) and f.get("subprotocol") == "sse"
+                       and isinstance(f.get("href"), str)), None)
+            if at is None:
+                continue
+            sse = forms[at]
+            poll = {"href": sse["href"], "op": copy.deepcopy(sse.get("op", [])), "subprotocol": "longpoll",
+                    "contentType": sse.get("contentType", "application/json")}
+            forms.insert(at, poll)
 
 
 def _forms(td: dict[str, Any]) -> Iterator[dict[str, Any]]:

@@ -23,7 +23,25 @@ def with_forms(td: dict[str, Any], thing: str, layout: FormLayout) -> dict[str, 
     out["base"] = f"{layout.http_base}/"
     if layout.mqtt is not None:  # its forms use the binding template's mqv: terms
         layout.mqtt.add_context(out)
+    _current_units(out)
     return clean_td(out)
+
+
+# units renamed in the Tactile context (a term may not contain "/" in JSON-LD 1.1): a TD recorded
+# before (a replay of an older recording) is served with the current name
+_RENAMED_UNITS = {"mm/s": "mm.s-1"}
+
+
+def _current_units(node: Any) -> None:
+    if isinstance(node, dict):
+        unit = node.get("unit")
+        if isinstance(unit, str) and unit in _RENAMED_UNITS:
+            node["unit"] = _RENAMED_UNITS[unit]
+        for v in node.values():
+            _current_units(v)
+    elif isinstance(node, list):
+        for v in node:
+            _current_units(v)
 
 
 _PLACEHOLDERS = ("oneOf", "anyOf", "allOf", "enum")

@@ -30,9 +30,18 @@ from .problem import MethodNotAllowed, write_problem
 from .sending import chunk, send_now
 from .things import ServedThing
 
-__all__ = ["BaseHandler", "routes"]
+__all__ = ["SSE_OPEN", "SSE_RETRY_MS", "BaseHandler", "routes"]
 
 _CONTEXT_BYTES: bytes | None = None
+
+SSE_RETRY_MS = 1000
+"""The ``retry:`` every SSE stream starts with: how long an ``EventSource`` waits before it reconnects
+(with ``Last-Event-ID``: resume loses nothing). wott-client waits it too after a drop."""
+SSE_OPEN = f"retry: {SSE_RETRY_MS}\n".encode()
+"""The first line of every SSE stream, sent at once (the headers go with it). A field, not a comment
+line (some older clients took one for an empty message and lost the first), and no blank line after
+it: it belongs to the first message, so that no client (httpx-sse neither, which dispatches any
+block holding a ``retry:``) receives an empty message for it."""
 
 
 class BaseHandler(tornado.web.RequestHandler):
@@ -179,7 +188,7 @@ class _StreamHandler(_Base):
             self.set_header("Content-Type", "text/event-stream; charset=utf-8")
             self.set_header("Cache-Control", "no-cache")
             self.set_header("X-Accel-Buffering", "no")
-            self.write(b": stream open\n\n")  # headers out now; comments are ignored by clients
+            self.write(SSE_OPEN)  # headers out now; a retry: field, the first message's (SSE_OPEN)
             await self.flush()
             self._last_write = time.monotonic()
             # Straight to the socket (``sending.py``), not RequestHandler.flush: a future, a done-callback
@@ -244,6 +253,14 @@ class _StreamHandler(_Base):
             self.write_json_text(rec.data)
             return
 
+    def head_of_stream(self) -> None:
+        """``HEAD``: the stream exists (200) and its media type, nothing subscribed. node-wot 0.9.2
+        opens a ``longpoll`` form with a HEAD handshake before its first GET (security/policy.py)."""
+        sse = "text/event-stream" in self.request.headers.get("Accept", "")
+        self.set_header("Content-Type", "text/event-stream; charset=utf-8" if sse else "application/json")
+        self.set_header("Cache-Control", "no-cache")
+        self.finish()
+
     def heartbeat(self, now: float, every_s: float) -> None:
         if self._sub is None or self._finished or now - self._last_write < every_s:
             return
@@ -265,19 +282,33 @@ class _StreamHandler(_Base):
 
 
 class EventStreamHandler(_StreamHandler):
-    async def get(self, thing_id: str, name: str | None = None) -> None:
+    def _thing(self, thing_id: str, name: str | None) -> ServedThing:
         thing = self.thing(thing_id)
         if name is not None and name not in (thing.td.get("events") or {}):
             raise tornado.web.HTTPError(404, reason=f"Unknown event {name!r}")
-        await self.stream(thing, (KIND_EVENT, name))
+        return thing
+
+    async def get(self, thing_id: str, name: str | None = None) -> None:
+        await self.stream(self._thing(thing_id, name), (KIND_EVENT, name))
+
+    def head(self, thing_id: str, name: str | None = None) -> None:
+        self._thing(thing_id, name)
+        self.head_of_stream()
 
 
 class PropertyObserveHandler(_StreamHandler):
-    async def get(self, thing_id: str, name: str) -> None:
+    def _thing(self, thing_id: str, name: str) -> ServedThing:
         thing = self.thing(thing_id)
         if not thing.is_observable(name):
             raise tornado.web.HTTPError(404, reason=f"No observable property {name!r}")
-        await self.stream(thing, (KIND_PROPERTY, name))
+        return thing
+
+    async def get(self, thing_id: str, name: str) -> None:
+        await self.stream(self._thing(thing_id, name), (KIND_PROPERTY, name))
+
+    def head(self, thing_id: str, name: str) -> None:
+        self._thing(thing_id, name)
+        self.head_of_stream()
 
 
 def _iostream(request: HTTPServerRequest) -> IOStream:

@@ -25,6 +25,7 @@ from wott_hub.events.record import KIND_EVENT, Record
 from wott_hub.security.audit import AuditLog
 from wott_hub.security.gate import guard
 from wott_hub.security.policy import AccessPolicy
+from wott_hub.td.defaults import state_defaults
 from wott_hub.web import routes as web_routes  # the twin: / and /twin/*
 
 from .adapters import FastThing, HubHTTPServer, HubServient, HubWebsocketServer
@@ -161,6 +162,7 @@ class HubServer:
     def expose(self, served: ServedThing) -> ExposedThing:
         """Serve a Thing on every binding. Its stream must already be on the event plane."""
         self.policy.secure_td(served.td)  # its securityDefinitions say what the gate does
+        state_defaults(served.td)  # readOnly, observable, safe, contentType...: stated (td/defaults.py)
         thing = FastThing(_wotpy_fragment(served))
         exposed = ExposedThing(servient=self.servient, thing=thing)
         for name in served.property_names:

@@ -12,6 +12,7 @@ from wott_hub.tactile.device import DeviceDescription
 from wott_hub.types import FormFactory
 
 from .actions import declared_actions
+from .defaults import state_defaults
 from .forms import FormLayout
 from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
 
@@ -43,7 +44,8 @@ def build_tactile_td(
     binding supplies its own ``forms``. ``context_url`` is where the Tactile
     JSON-LD context is served (by default the hub at ``base``). TD 1.1 allows
     only prefix maps inline, so the ``tac`` prefix is also given inline for
-    processors that do not dereference.
+    processors that do not dereference. The TD 1.1 defaults a client decides by are stated
+    (``wott_hub.td.defaults``).
     """
     layout = FormLayout(base.rstrip("/"))
     forms = forms or layout.factory(desc.id)
@@ -79,7 +81,7 @@ def build_tactile_td(
     }
     if declared:
         td["actions"] = declared
-    return td
+    return state_defaults(td)
 
 
 def static_property_values(desc: DeviceDescription) -> dict[str, Any]:

@@ -223,7 +223,7 @@ DETAIL_EVENTS: dict[str, dict[str, Any]] = {
                     "properties": {
                         "contacts": {"type": "integer", "minimum": 0},
                         "durationS": {"type": "number", "minimum": 0, "unit": "s"},
-                        "speedMmPerS": {"type": "number", "minimum": 0, "unit": "mm/s"},
+                        "speedMmPerS": {"type": "number", "minimum": 0, "unit": "mm.s-1"},
                         "moveMm": {"type": "number", "minimum": 0, "unit": "mm"},
                         "approachMm": {"type": "number", "unit": "mm"},
                     },
