@@ -25,6 +25,7 @@ __all__ = [
     "HistoryError",
     "InvalidInput",
     "NotFound",
+    "RecordRefused",
     "WottHubError",
     "exit_code",
     "http_status",
@@ -57,6 +58,11 @@ class DriverError(WottHubError):
 
 class HistoryError(WottHubError):
     """The history database cannot be used (unknown URL scheme, newer schema, corrupted file)."""
+
+
+class RecordRefused(HistoryError):
+    """The history database refused a record's data (a duplicate seq, a value out of range, a Thing
+    never registered): writing the same record again can never succeed."""
 
 
 # The one translation table for each audience; the most specific class listed wins.
