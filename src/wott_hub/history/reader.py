@@ -24,8 +24,7 @@ import json
 import sqlite3
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from itertools import repeat
-from typing import Any, NamedTuple, ParamSpec, TypeVar
+from typing import Any, ParamSpec, TypeVar
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
@@ -39,7 +38,7 @@ from .db_errors import database_error, driver_message, is_database_error
 from .models import EventRow, ThingRow
 from .sqlite import JoinedPage, joined_page
 from .state import state_of
-from .storage import ThingSummary
+from .storage import Columns, ThingSummary
 
 __all__ = ["HistoryReader"]
 
@@ -73,29 +72,15 @@ def _seq_range(key: int, after: int, upto: int, limit: int) -> sa.Select[int, in
             .order_by(_E.c.seq).limit(limit))
 
 
-class _Columns(NamedTuple):
-    """A page of records as columns, payloads decoded: what a page is read as before its records
-    are made (no tuple built and unpacked per record)."""
-
-    seqs: Sequence[int]
-    times: Sequence[int]
-    kinds: Sequence[int]
-    names: Sequence[str]
-    data: list[str]
-
-    def records(self, thing: str) -> list[Record]:
-        return list(map(Record, repeat(thing), self.seqs, self.kinds, self.names, self.times, self.data))
-
-
-def _columns(rows: Sequence[Sequence[Any]]) -> _Columns:
+def _columns(rows: Sequence[Sequence[Any]]) -> Columns:
     """(seq, t_ns, kind, name, stored) rows, not empty, as columns with the text sent live for
     ``stored``: the packets of the rows decoded together, the columns moved by C-level ``zip``s."""
     seqs, times, kinds, names, stored = zip(*rows, strict=True)
-    return _Columns(seqs, times, kinds, names, decode_many(stored, times))
+    return Columns(seqs, times, kinds, names, decode_many(stored, times))
 
 
-def _joined_columns(page: JoinedPage) -> _Columns:
-    return _Columns(page.seqs.tolist(), page.times.tolist(), page.kinds.tolist(), page.names,
+def _joined_columns(page: JoinedPage) -> Columns:
+    return Columns(page.seqs.tolist(), page.times.tolist(), page.kinds.tolist(), page.names,
                     decode_joined(page.joined, page.sizes, page.times))
 
 
@@ -264,6 +249,11 @@ class HistoryReader:
 
     def pages(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
               names: list[str] | None = None, page: int = 20_000) -> Iterator[list[Record]]:
+        for cols in self.columns(thing, t_from_ns, t_to_ns, names, page):
+            yield cols.records(thing)
+
+    def columns(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
+                names: list[str] | None = None, page: int = 20_000) -> Iterator[Columns]:
         """On SQLite each page is one row of ``sqlite.JOINED``, the next one read in a thread of its
         own while this one is decoded and used (a query is one step of SQLite, run without the
         GIL: it overlaps the Python work); elsewhere, and for a page ``JOINED`` cannot give, the
@@ -290,7 +280,7 @@ class HistoryReader:
                     cursor = int(joined.seqs[-1])
                     if cursor < hi and pool is not None:
                         ahead = pool.submit(self._joined, key, cursor, hi, t_from_ns, t_to_ns, names, page)
-                    yield _joined_columns(joined).records(thing)
+                    yield _joined_columns(joined)
                     continue
                 rows = self._fetch(_seq_range(key, cursor, hi, page))
                 if not rows:
@@ -301,7 +291,7 @@ class HistoryReader:
                     hi_t = t_to_ns if t_to_ns is not None else 1 << 63
                     rows = [r for r in rows if lo_t <= r[1] <= hi_t and (not names or r[3] in names)]
                 if rows:
-                    yield _columns(rows).records(thing)
+                    yield _columns(rows)
         finally:
             if pool is not None:
                 pool.shutdown(wait=False, cancel_futures=True)

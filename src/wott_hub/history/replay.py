@@ -23,18 +23,19 @@ import asyncio
 import contextlib
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 from wott_hub.errors import InvalidInput
 from wott_hub.events.record import Record
 
 from .merge import merged_pages
-from .storage import StorageReader
+from .storage import Columns, StorageReader
 
 __all__ = ["Emit", "Replayer"]
 
 Emit = Callable[[Record], None]
-"""emit(record): a record as it is replayed (the Replayer's own: read for this emission)."""
+"""emit(record): a record as it is replayed, made for this emission: its Thing, seq, affordance and
+payload as recorded, its ``t_ns`` the time it is emitted."""
 
 
 class Replayer:
@@ -97,14 +98,22 @@ class Replayer:
             return lo, hi
         return start + self.offset_ns, hi
 
+    def _pages(self, lo: int | None, hi: int | None) -> Iterator[Columns | list[Record]]:
+        """One Thing: its pages as ``Columns`` (a ``Record`` is made as each is emitted: cheaper than a
+        page of them, ``storage.Columns``); several: their records merged by time."""
+        if len(self.things) == 1:
+            return self.reader.columns(self.things[0], lo, hi, self.names, self.page)
+        return merged_pages(self.reader, self.things, lo, hi, self.names, self.page)
+
     async def run(self, emit: Emit, stop: asyncio.Event | None = None) -> int:
         """Emit until the range ends (or forever with ``loop``, until ``stop`` is set)."""
         loop = asyncio.get_running_loop()
         lo, hi = await asyncio.to_thread(self._range)
         now = time.time_ns
+        thing = self.things[0]
         clock0: float | None = None
         while stop is None or not stop.is_set():
-            pages = merged_pages(self.reader, self.things, lo, hi, self.names, self.page)
+            pages = self._pages(lo, hi)
             nxt = asyncio.ensure_future(asyncio.to_thread(next, pages, None))
             t_first = t_last = None
             n_cycle = 0
@@ -114,16 +123,26 @@ class Replayer:
                     break
                 # the next page is read (in a worker thread) while this one is emitted
                 nxt = asyncio.ensure_future(asyncio.to_thread(next, pages, None))
-                count, t0, t1 = len(page), page[0].t_ns, page[-1].t_ns
+                if isinstance(page, Columns):
+                    count, t0, t1 = len(page.data), page.times[0], page.times[-1]
+                else:
+                    count, t0, t1 = len(page), page[0].t_ns, page[-1].t_ns
                 if t_first is None:
                     t_first = t0
                     if clock0 is None:
                         clock0 = loop.time()
                 if self.speed == 0:  # as fast as possible: no clock, a yield every 2,000 records
                     for done in range(0, count, 2000):
-                        for rec in page[done:done + 2000]:
-                            rec.t_ns = now()
-                            emit(rec)
+                        end = done + 2000
+                        if isinstance(page, Columns):
+                            for seq, kind, name, data in zip(page.seqs[done:end], page.kinds[done:end],
+                                                             page.names[done:end], page.data[done:end],
+                                                             strict=True):
+                                emit(Record(thing, seq, kind, name, now(), data))
+                        else:
+                            for rec in page[done:end]:
+                                rec.t_ns = now()
+                                emit(rec)
                         await asyncio.sleep(0)
                         if stop is not None and stop.is_set():
                             nxt.cancel()
@@ -134,7 +153,7 @@ class Replayer:
                     t_last = t1
                     continue
                 assert clock0 is not None  # set with t_first, on this page or an earlier one
-                for rec in page:
+                for rec in page.records(thing) if isinstance(page, Columns) else page:
                     t_ns = rec.t_ns
                     due = clock0 + (t_ns - t_first) / 1e9 / self.speed
                     delay = due - loop.time()

@@ -32,16 +32,17 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from itertools import repeat
 from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
-if TYPE_CHECKING:
-    from wott_hub.events.record import Record
+from wott_hub.events.record import Record
 
+if TYPE_CHECKING:
     from .lease import Lease
     from .retention import Retention
     from .state import DatabaseState
 
-__all__ = ["Prepared", "Row", "Step", "StorageReader", "StorageWriter", "ThingSummary"]
+__all__ = ["Columns", "Prepared", "Row", "Step", "StorageReader", "StorageWriter", "ThingSummary"]
 
 Step = Callable[[], bool]
 """One step of work done while the database takes a batch; False once nothing is left."""
@@ -98,6 +99,22 @@ class ThingSummary:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
+class Columns(NamedTuple):
+    """A page of one Thing's records as columns, payloads decoded: how a reader reads a page before
+    it makes ``Record``s of it, and what a replay of one Thing walks, making a ``Record`` only as it
+    emits one. (A page of 20,000 ``Record``s made at once costs ~0.2 µs more a record than the same
+    made one by one and let go: the garbage collector's passes over the live ones, measured.)"""
+
+    seqs: Sequence[int]
+    times: Sequence[int]
+    kinds: Sequence[int]
+    names: Sequence[str]
+    data: list[str]
+
+    def records(self, thing: str) -> list[Record]:
+        return list(map(Record, repeat(thing), self.seqs, self.kinds, self.names, self.times, self.data))
+
+
 class StorageReader(Protocol):
     @property
     def failure(self) -> str:
@@ -119,6 +136,11 @@ class StorageReader(Protocol):
     def pages(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
               names: list[str] | None = None, page: int = 20_000) -> Iterator[list[Record]]:
         """``thing``'s records in [t_from, t_to] (only ``names``, if given) in seq (= time) order."""
+        ...
+
+    def columns(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
+                names: list[str] | None = None, page: int = 20_000) -> Iterator[Columns]:
+        """``pages`` as ``Columns`` (no page empty)."""
         ...
 
     def record_page(self, thing: str, *, t_from_ns: int | None = None, t_to_ns: int | None = None,
