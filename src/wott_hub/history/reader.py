@@ -7,8 +7,9 @@ Within a Thing, time order is seq order: the processor rejects frames that go
 back in time. Pages are separate short transactions, so a long replay never
 holds a read snapshot open (SQLite could not checkpoint its WAL meanwhile). On SQLite a page is
 read as one row whose columns SQLite joined (``sqlite.JOINED``: no Python object per row). Every
-read gives ``Record``s (``storage.StorageReader``): pages are decoded as columns, then made
-records in one ``map``.
+read gives ``Record``s (``storage.StorageReader``): a page is decoded as ``Columns``, then made
+records in one ``map``; ``columns`` gives the page as it is, to a replay that makes each record
+as it emits it.
 
 Contract: a read the database fails (a corrupted page, a file that is not a
 database, a lost connection) raises ``wott_hub.errors.HistoryError`` naming

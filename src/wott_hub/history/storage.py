@@ -12,7 +12,7 @@ engine's hands is a list of the events table's rows.
 Contract of a ``StorageWriter``:
 - ``register`` creates or updates a Thing's row and, in the same transaction, reserves its
   sequence ``ahead`` of the last seq that may have been used, which it returns; ``Conflict`` if
-  a live hub of another id records that Thing. The first call needs the ``lease``.
+  a live hub of another id records that Thing. The writer holds the ``lease`` before the first.
 - ``write`` writes a prepared batch and moves the reservations of ``reserve`` (Thing -> seq) in
   one transaction: all of it or nothing. ``RecordRefused`` when the database refused rows for
   their data (the writer halves the batch to find them); any other error is a ``HistoryError``
