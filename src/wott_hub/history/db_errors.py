@@ -9,7 +9,8 @@ Contract:
   database refused the rows' *data* (a unique key, a value its column cannot hold: the same rows
   can never succeed, so a writer isolates and gives them up), else ``HistoryError`` (locked,
   unreachable, corrupted, a table missing: worth retrying later). Its message is ``doing``, a
-  colon and the driver's message, or the driver's message alone when ``doing`` is empty.
+  colon and the driver's message, or the driver's message alone when ``doing`` is empty (a
+  ``HistoryError`` already is one: it is kept).
 - ``translated(doing)``: a block whose database errors leave it as ``database_error``; the
   hub's own errors (``WottHubError``) and anything else pass unchanged.
 - ``driver_message(e)``: the first line of the driver's message, without SQLAlchemy's
@@ -25,9 +26,9 @@ from contextlib import contextmanager
 
 import sqlalchemy as sa
 
-from wott_hub.errors import HistoryError, RecordRefused, WottHubError
+from wott_hub.errors import HistoryError, RecordRefused
 
-__all__ = ["database_error", "driver_message", "is_database_error", "refuses_data", "translated"]
+__all__ = ["database_error", "driver_message", "is_database_error", "translated"]
 
 _PEP249 = ("DatabaseError", "InterfaceError")
 """The base classes of every error a PEP 249 driver raises (``sqlite3``, ``psycopg``)."""
@@ -55,16 +56,16 @@ def is_database_error(e: BaseException) -> bool:
     return isinstance(e, sa.exc.SQLAlchemyError) or _named(e, _PEP249)
 
 
-def refuses_data(e: BaseException) -> bool:
+def _refuses_data(e: BaseException) -> bool:
     """Does ``e`` say the rows themselves can never be written (not the database's state)?"""
-    return isinstance(e, RecordRefused) or (not isinstance(e, WottHubError) and _named(_cause(e), _DATA))
+    return _named(_cause(e), _DATA)
 
 
 def database_error(e: BaseException, doing: str = "") -> HistoryError:
     if isinstance(e, HistoryError):
         return e
     message = f"{doing}: {driver_message(e)}" if doing else driver_message(e)
-    return RecordRefused(message) if refuses_data(e) else HistoryError(message)
+    return RecordRefused(message) if _refuses_data(e) else HistoryError(message)
 
 
 @contextmanager
