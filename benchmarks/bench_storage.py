@@ -141,7 +141,7 @@ def one_mode(tmp: Path, compact: bool, recs, skins) -> dict:
     for _ in range(3):
         rp = Replayer(reader, "dev", speed=0)
         t0 = time.perf_counter()
-        asyncio.run(rp.run(lambda k, nm, t, d: None))
+        asyncio.run(rp.run(lambda r: None))
         replays.append(time.perf_counter() - t0)
         assert rp.emitted == len(recs)
     replay_s = statistics.median(replays)

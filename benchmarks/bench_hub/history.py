@@ -84,9 +84,9 @@ async def history_bench(tmp: Path, frames: int) -> dict:
     plane.add_stream("replay-dev", record=False)
     count = 0
 
-    def emit(kind, name, t_ns, data):
+    def emit(r):
         nonlocal count
-        plane.publish("replay-dev", kind, name, t_ns, data)
+        plane.publish("replay-dev", r.kind, r.name, r.t_ns, r.data)
         count += 1
 
     t0 = time.perf_counter()

@@ -35,6 +35,7 @@ __all__ = [
     "HistoryError",
     "InvalidInput",
     "NotFound",
+    "RecordRefused",
     "SettingsError",
     "WorkerDied",
     "WottHubError",
@@ -80,6 +81,11 @@ class WorkerDied(DriverError):
 
 class HistoryError(WottHubError):
     """The history database cannot be used (unknown URL scheme, newer schema, corrupted file)."""
+
+
+class RecordRefused(HistoryError):
+    """The history database refused a record's data (a duplicate seq, a value out of range, a Thing
+    never registered): writing the same record again can never succeed."""
 
 
 # The one translation table for each audience; the most specific class listed wins.

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 if TYPE_CHECKING:  # annotations only: importing the events package here would be a cycle through it
     from wott_hub.events.record import Record
 
-__all__ = ["Direct", "Emit", "EmitFrom", "FormFactory", "FrameSink", "Invoke", "RecordSink"]
+__all__ = ["Direct", "Emit", "FormFactory", "FrameSink", "Invoke", "RecordSink"]
 
 
 class RecordSink(Protocol):
@@ -64,10 +64,6 @@ Invoke = Callable[..., Awaitable[Any]]
 """An action served over HTTP (``hub.actions``): ``invoke(input, **route_groups)``, the action's output
 or a ``Stream``."""
 
-Emit = Callable[[int, str, int, str], None]
-"""A replay's output of one recorded record (``history.replay.Replayer.run``): ``emit(kind, name,
-t_ns, data)``."""
-
-EmitFrom = Callable[[str, int, str, int, str], None]
-"""The same for a replay of several Things (``Replayer.run_from``): ``emit(thing, kind, name, t_ns,
-data)``, the Thing the record was recorded for first."""
+Emit = Callable[["Record"], None]
+"""A replay's output (``history.replay.Replayer.run``): ``emit(record)``, a record made for this
+emission: its Thing, seq, affordance and payload as recorded, its ``t_ns`` the time it is emitted."""

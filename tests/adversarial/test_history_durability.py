@@ -105,7 +105,7 @@ def test_sigkill_under_load_in_committed_mode_loses_nothing_a_subscriber_saw(tmp
 
     eng = create_engine(database_url(db))
     try:
-        recorded = {row[0] for page in HistoryReader(eng).pages("load") for row in page}
+        recorded = {r.seq for page in HistoryReader(eng).pages("load") for r in page}
     finally:
         eng.dispose()
     missing = sorted(set(seen) - recorded)
@@ -129,7 +129,7 @@ def test_committed_mode_delivers_only_after_the_commit_and_never_a_refused_recor
         start = writer.register_thing("d")
         with eng.begin() as conn:  # the row seq start+3 is taken already: the database refuses ours
             conn.exec_driver_sql("INSERT INTO events (thing_key, seq, t_ns, kind, name, data) "
-                                 f"VALUES ({writer.keys['d']}, {start + 3}, 3, 0, 'tick', '0')")
+                                 f"VALUES ({writer.storage.keys['d']}, {start + 3}, 3, 0, 'tick', '0')")
         plane.history_sink = writer
         plane.add_stream("d", record=True, start_after=start)
         sub = plane.subscribe("d", (0, None))
@@ -144,7 +144,7 @@ def test_committed_mode_delivers_only_after_the_commit_and_never_a_refused_recor
                 if got and got[-1] == 10:
                     break
         await asyncio.to_thread(writer.stop)
-        recorded = {row[0] - start for page in HistoryReader(eng).pages("d") for row in page}
+        recorded = {r.seq - start for page in HistoryReader(eng).pages("d") for r in page}
         eng.dispose()
         return before, got, recorded
 

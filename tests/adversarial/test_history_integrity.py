@@ -115,7 +115,7 @@ def test_an_sse_resume_needing_corrupted_history_is_refused_with_503(hub_on):
 def test_a_read_error_during_a_resume_ends_the_stream_with_an_error_not_in_silence(hub_on):
     h = hub_on()
     # as if the start-up check had not (yet) seen it: the read itself must say so
-    state_of(_writer(h.hub).engine).integrity = "ok"
+    state_of(_writer(h.hub).storage.engine).integrity = "ok"
     url = h.hub.td_url("d") + "/events"
     with httpx.Client(timeout=10) as c, c.stream(
             "GET", url, headers={"Accept": "text/event-stream", "Last-Event-ID": "5"}) as r:

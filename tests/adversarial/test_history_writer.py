@@ -35,14 +35,14 @@ def _recs(thing: str, after: int, n: int) -> list[Record]:
 
 
 def _seqs(engine, thing: str) -> list[int]:
-    return [row[0] for page in HistoryReader(engine).pages(thing) for row in page]
+    return [r.seq for page in HistoryReader(engine).pages(thing) for r in page]
 
 
 def test_a_unique_key_conflict_is_isolated_reported_and_the_writer_carries_on(engine):
     watermarks: list[dict[str, int]] = []
     w = HistoryWriter(engine, interval_s=0.01, on_commit=watermarks.append)
     start = w.register_thing("d")
-    key = w.keys["d"]
+    key = w.storage.keys["d"]
     # what a second hub did (issue 16): a row with a seq this writer is about to write
     with engine.begin() as conn:
         conn.exec_driver_sql("INSERT INTO events (thing_key, seq, t_ns, kind, name, data) "

@@ -70,7 +70,7 @@ def test_rows_the_database_refuses_are_isolated_as_in_the_thread(tmp_path):
     start = w.register_thing("d")
     with engine.begin() as conn:  # a row already there with a seq this writer is about to write
         conn.exec_driver_sql("INSERT INTO events (thing_key, seq, t_ns, kind, name, data) "
-                             f"VALUES ({w.keys['d']}, {start + 7}, 1, 0, 'tick', '\"theirs\"')")
+                             f"VALUES ({w.storage.keys['d']}, {start + 7}, 1, 0, 'tick', '\"theirs\"')")
     w.start()
     try:
         for i in range(1, 21):
@@ -157,8 +157,8 @@ def test_a_backlog_is_written_by_the_writers_thread_until_the_writer_keeps_up(tm
         w.submit(Record("d", start + i, KIND_EVENT, "tick", 10**18 + i, str(i)))
     process = w._process
     by_process = []
-    commit = process.commit
-    process.commit = lambda records, *a: (by_process.append(len(records)), commit(records, *a))
+    write = process.write
+    process.write = lambda records, *a: (by_process.append(len(records)), write(records, *a))
     w.start()
     try:
         assert w.flush(60)

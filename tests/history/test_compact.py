@@ -46,14 +46,14 @@ def test_skin_packets_are_stored_packed_and_read_back_byte_for_byte(writer, read
     for r in recs:
         writer.submit(r)
     assert writer.flush()
-    stored = [d for n, d in _stored(writer.engine) if n == SKIN]
+    stored = [d for n, d in _stored(writer.storage.engine) if n == SKIN]
     packed = [bytes(d) for d in stored if bytes(d)[0] == PACKED]
     assert len(packed) == 400 + 2  # every packet of the pipeline's form, the empty one, the unsorted one
     assert max(len(p) for p in packed[:400]) < 120  # ~20 nodes: ~66 B instead of ~1,100 B of JSON
     # resume (the event plane's HistorySource) and ranges give back every byte sent live
     got, _ = reader.rows("pad", start, seq, (KIND_EVENT, SKIN), 10_000)
     assert [r.data for r in got] == [r.data for r in recs if r.name == SKIN]
-    paged = [row[4] for page in reader.pages("pad", names=[SKIN], page=97) for row in page]
+    paged = [row.data for page in reader.pages("pad", names=[SKIN], page=97) for row in page]
     assert paged == [r.data for r in recs if r.name == SKIN]
     assert all(decode(encode(0, SKIN, r.t_ns, r.data), r.t_ns) == r.data for r in recs)
 
@@ -103,7 +103,7 @@ def test_the_migration_converts_a_database_made_with_revision_0005(database):
     others = [d for n, d in stored if n != SKIN]
     assert others and all(decode(d, 0)[0] == "{" for d in others)
     reader = HistoryReader(engine)
-    assert [row[4] for page in reader.pages("old") for row in page] == [r.data for r in recs]
+    assert [row.data for page in reader.pages("old") for row in page] == [r.data for r in recs]
     if engine.dialect.name == "sqlite":
         with engine.connect() as conn:  # the file was vacuumed into incremental auto-vacuum
             assert conn.exec_driver_sql("PRAGMA auto_vacuum").scalar() == 2
@@ -274,7 +274,7 @@ def test_the_writer_packs_the_pipelines_records_from_their_arrays(writer, reader
     for r in recs:
         writer.submit(r)
     assert writer.flush()
-    stored = [bytes(d) for _, d in _stored(writer.engine)]
+    stored = [bytes(d) for _, d in _stored(writer.storage.engine)]
     assert all(d[0] == PACKED for d in stored)
     assert stored == [encode(r.kind, r.name, r.t_ns, r.data) for r in recs]
     got, _ = reader.rows("pad", start, recs[-1].seq, (KIND_EVENT, SKIN), 10_000)

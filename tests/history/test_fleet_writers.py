@@ -86,8 +86,8 @@ def test_two_hubs_write_one_database_concurrently_and_lose_nothing(database, eng
     for hub in ("hub-a", "hub-b"):
         for k in (1, 2):
             rows = [row for page in reader.pages(f"urn:{hub}:device:{k}", page=5000) for row in page]
-            assert [r[0] for r in rows] == list(range(1, N + 1))  # every record, in order, no hole
-            assert all(f'"hub": "{hub}"' in r[4] for r in rows)  # nobody wrote into another's Thing
+            assert [r.seq for r in rows] == list(range(1, N + 1))  # every record, in order, no hole
+            assert all(f'"hub": "{hub}"' in r.data for r in rows)  # nobody wrote into another's Thing
     # both released at their clean stop
     assert Lease(engine, hub_id="hub-a").holder() is None and Lease(engine, hub_id="hub-b").holder() is None
     # the history command reads the shared database by its URL (or file)
@@ -104,9 +104,9 @@ def test_one_process_may_write_as_two_hub_ids_but_not_take_a_held_id_from_anothe
     b = HistoryWriter(engine, interval_s=0.01, hub_id="hub-b")
     try:
         assert a.register_thing("urn:a:1") == 0 and b.register_thing("urn:b:1") == 0
-        assert a.lease.held and b.lease.held
+        assert a.storage.lease.held and b.storage.lease.held
         holder = Lease(engine, hub_id="hub-a").holder()
-        assert holder is not None and holder.holder == a.lease.me
+        assert holder is not None and holder.holder == a.storage.lease.me
         with engine.begin() as conn:  # hub-a's row held by a live process of another host
             conn.exec_driver_sql("UPDATE hub_lease SET holder='elsewhere', pid=1, host='h' "
                                  "WHERE hub_id='hub-a'")

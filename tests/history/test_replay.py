@@ -27,7 +27,7 @@ def test_replay_reproduces_payloads_in_order_at_the_requested_speed(reader, reco
     async def main():
         loop = asyncio.get_running_loop()
         await Replayer(reader, "d", speed=2.0, page=50).run(
-            lambda kind, name, t, data: got.append((loop.time(), kind, name, data)))
+            lambda r: got.append((loop.time(), r.kind, r.name, r.data)))
 
     asyncio.run(main())
     assert [(k, n, d) for _, k, n, d in got] == [(r.kind, r.name, r.data) for r in recorded]
@@ -44,14 +44,14 @@ def test_a_time_range_replays_only_that_range(reader, recorded):
     lo, hi = recorded[100].t_ns, recorded[139].t_ns
     rp = Replayer(reader, "d", t_from_ns=lo, t_to_ns=hi, speed=0)
     got = []
-    asyncio.run(rp.run(lambda k, n, t, d: got.append(d)))
+    asyncio.run(rp.run(lambda r: got.append(r.data)))
     assert got == [r.data for r in recorded if lo <= r.t_ns <= hi]
 
 
 def test_speed_zero_replays_everything_without_waiting(reader, recorded):
     rp = Replayer(reader, "d", speed=0)
     got = []
-    asyncio.run(rp.run(lambda k, n, t, d: got.append(d)))
+    asyncio.run(rp.run(lambda r: got.append(r.data)))
     assert got == [r.data for r in recorded] and rp.cycles == 1
 
 
@@ -62,7 +62,7 @@ def test_loop_starts_again_after_the_end(reader, recorded):
     async def main():
         stop = asyncio.Event()
         asyncio.get_running_loop().call_later(0.45, stop.set)
-        await rp.run(lambda k, n, t, d: got.append(d), stop)
+        await rp.run(lambda r: got.append(r.data), stop)
 
     asyncio.run(main())
     assert rp.cycles >= 2
@@ -98,7 +98,7 @@ def test_pages_sqlite_cannot_join_are_read_row_by_row(database, engine, reader, 
     try:
         for rd in (reader, HistoryReader(short)):
             got: list[tuple[int, str, str]] = []
-            emit = lambda k, n, t, d, got=got: got.append((k, n, d))  # noqa: E731
+            emit = lambda r, got=got: got.append((r.kind, r.name, r.data))  # noqa: E731
             asyncio.run(Replayer(rd, "d", speed=0, page=40).run(emit))
             assert got == want
     finally:

@@ -33,7 +33,7 @@ def _play(rp: Replayer, timed: bool = False):
 
     async def main():
         loop = asyncio.get_running_loop()
-        await rp.run_from(lambda thing, k, n, t, d: got.append((loop.time(), thing, n, d)))
+        await rp.run(lambda r: got.append((loop.time(), r.thing, r.name, r.data)))
 
     asyncio.run(main())
     return got

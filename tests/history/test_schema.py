@@ -103,7 +103,7 @@ def test_the_migration_renders_for_postgresql():
 def test_inserts_use_the_drivers_paramstyle():
     from sqlalchemy.dialects import postgresql, sqlite
 
-    from wott_hub.history.inserts import positional_insert
+    from wott_hub.history.sql import positional_insert
 
     class E:
         def __init__(self, dialect):

@@ -26,8 +26,8 @@ def test_records_are_written_in_batches_and_read_back_in_order(writer, reader, m
     assert writer.written == 5000
     assert writer.batches < 100  # batched, not a commit per event
     rows = [row for page in reader.pages("pad-1", page=700) for row in page]
-    assert [r[0] for r in rows] == [r.seq for r in recs]
-    assert [r[4] for r in rows] == [r.data for r in recs]
+    assert [r.seq for r in rows] == [r.seq for r in recs]
+    assert [r.data for r in rows] == [r.data for r in recs]
     (summary,) = reader.things()
     assert (summary.id, summary.count, summary.first_seq, summary.last_seq) == ("pad-1", 5000, 1, 5000)
     assert reader.thing_info("pad-1")["td"] == {"title": "Pad"}
@@ -60,7 +60,7 @@ def test_after_a_crash_the_sequence_continues_above_every_number_handed_out(engi
     assert restart == RESERVE  # reserved when the Thing registered, before its first record
     from wott_hub.history import HistoryReader
 
-    assert [row[0] for p in HistoryReader(engine).pages("d") for row in p] == list(range(1, 201))
+    assert [row.seq for p in HistoryReader(engine).pages("d") for row in p] == list(range(1, 201))
 
 
 def test_resume_rows_filter_by_interest_and_report_progress(writer, reader, make_records):
@@ -108,7 +108,7 @@ def test_retention_by_age_deletes_only_old_events(writer, reader, engine, make_r
     writer.flush()
     deleted = apply_retention(engine, Retention(days=2), now_ns=10**18 + 6 * day)
     assert deleted == 10
-    assert [row[0] for p in reader.pages("d") for row in p] == [r.seq for r in new]
+    assert [row.seq for p in reader.pages("d") for row in p] == [r.seq for r in new]
 
 
 def test_retention_by_size_keeps_the_newest_data_under_the_limit(writer, reader, engine, make_records):
@@ -126,7 +126,7 @@ def test_retention_by_size_keeps_the_newest_data_under_the_limit(writer, reader,
     assert apply_retention(engine, Retention(max_mb=limit_mb)) > 0
     with engine.connect() as conn:
         assert used_bytes(conn) <= limit_mb * 1e6
-    seqs = [row[0] for p in reader.pages("d") for row in p]
+    seqs = [row.seq for p in reader.pages("d") for row in p]
     assert seqs and seqs[-1] == recs[-1].seq  # the newest survive
     assert seqs == list(range(seqs[0], recs[-1].seq + 1))  # a contiguous newest range
 
@@ -140,7 +140,7 @@ def test_a_refused_row_is_isolated_and_the_rest_written_on_either_engine(writer,
     start = writer.register_thing("d")
     recs = make_records("d", start, 100)
     with engine.begin() as conn:  # seq 50 is already there (a second writer of the same Thing)
-        conn.execute(EventRow.__table__.insert().values(thing_key=writer.keys["d"], seq=recs[49].seq,
+        conn.execute(EventRow.__table__.insert().values(thing_key=writer.storage.keys["d"], seq=recs[49].seq,
                                                         t_ns=recs[49].t_ns, kind=0, name="other", data=b"{}"))
     writer.start()
     for r in recs:
@@ -148,9 +148,9 @@ def test_a_refused_row_is_isolated_and_the_rest_written_on_either_engine(writer,
     assert writer.flush()
     assert (writer.written, writer.failed_records) == (99, 1)
     assert "seq 50 not recorded" in writer.last_error
-    rows = {row[0]: row for page in reader.pages("d") for row in page}
+    rows = {row.seq: row for page in reader.pages("d") for row in page}
     assert sorted(rows) == [r.seq for r in recs]
-    assert rows[50][3] == "other" and all(rows[r.seq][4] == r.data for r in recs if r.seq != 50)
+    assert rows[50].name == "other" and all(rows[r.seq].data == r.data for r in recs if r.seq != 50)
 
 
 def _stored(engine: Engine) -> list[tuple[int, str, bytes]]:

@@ -70,7 +70,7 @@ def test_devices_and_a_page_of_records_match_the_database(live, hub_td):
     assert resp.status_code == 200 and resp.headers["content-type"].startswith("application/x-ndjson")
     lines = [json.loads(x) for x in resp.text.splitlines()]
     pages = live.hub.reader.pages("pad", lo, None, ["skinDeformedDetection"])
-    want = [r for page in pages for r in page][:80]
+    want = [(r.seq, r.t_ns, r.kind, r.name, r.data) for page in pages for r in page][:80]
     assert [(x["seq"], x["t_ns"], x["kind"], x["name"], json.dumps(x["data"], separators=(",", ":")))
             for x in lines] == [(s, t, KIND_NAMES[k], n, json.dumps(json.loads(d), separators=(",", ":")))
                                 for s, t, k, n, d in want[:40]]

@@ -76,8 +76,7 @@ def _rows(db):
     """Every recorded record of "pad" (events and property changes): seq -> (kind, data)."""
     engine = create_engine(database_url(db))
     try:
-        return {seq: (kind, data) for page in HistoryReader(engine).pages("pad")
-                for seq, _t, kind, _name, data in page}
+        return {r.seq: (r.kind, r.data) for page in HistoryReader(engine).pages("pad") for r in page}
     finally:
         engine.dispose()
 

@@ -87,7 +87,7 @@ def _export(devices: list[str] | str, t_from: str | None, t_to: str | None, name
         raise InvalidInput(f"--output {str(output)!r}: the folder {str(output.parent)!r} does not exist")
     reader = open_reader(resolve_database(database, config))
     for device in devices:
-        if reader.key(device) is None:
+        if not reader.recorded(device):
             raise NotFound(f"no recorded device {device!r} (see `wott-hub history list`)")
     if output is None:
         return sum(export_jsonl(reader, sys.stdout, d, t_from_ns=lo, t_to_ns=hi, names=name or None)

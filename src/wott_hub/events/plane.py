@@ -141,6 +141,15 @@ class EventPlane:
         self.streams[thing] = st
         return st
 
+    def continue_after(self, thing: str, seq: int | None, *, record: bool) -> Stream:
+        """Before ``thing`` publishes: whether its records go to history (``record``) and, if ``seq``
+        is given, that its sequence continues after it (the last seq history may have handed out)."""
+        st = self.stream(thing)
+        st.record = record
+        if seq is not None:
+            st.seq = st.committed = seq
+        return st
+
     def remove_stream(self, thing: str) -> None:
         st = self.streams.pop(thing, None)
         if st is None:

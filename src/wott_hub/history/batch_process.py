@@ -5,18 +5,20 @@ Python, holding the GIL it shares with the event loop; the loop waits for it eac
 the interpreter's 5 ms switch interval). Measured at 32 devices x 120 Hz on 2 cores: 2,730 of
 3,840 frames/s processed and SSE p50 5.3 ms with the thread, 3,530-3,620 and 1.4-1.7 ms with no
 history at all (docs/history.md, "The writer's process"). Here the writer's thread only hands
-each batch's records over, as they are, and waits (GIL released) while this process encodes and
-commits them; the writer keeps everything else (queue, lease, reservations, isolation of
-refused rows, health, retention). A backlog (``writer._CATCH_UP``) the thread writes itself:
-handing over costs ~8 µs a record, more than catching up can spare.
+each batch's records over, as they are, and waits (GIL released) while this process has the
+same storage engine (``engines.open_storage``) encode and commit them; the writer keeps
+everything else (queue, lease, reservations, isolation of refused records, health, retention).
+A backlog (``writer._CATCH_UP``) the thread writes itself: handing over costs ~8 µs a record,
+more than catching up can spare.
 
 Protocol: two pipes of pickled messages (``multiprocessing.connection`` framing), strictly
-request then answer. Writer -> process: ``("open", url)`` once, then ``("commit", records,
-reserve, compact)`` (``records``: ``(thing_key, seq, t_ns, kind, name, data, skin)`` with ``skin``
-None or ``SkinArrays.to_wire``; ``reserve``: ``(thing_key, seq_reserved)`` to set in the same
-transaction). Process -> writer: ``("ok",)``, ``("refused", message)`` (the database refused the
-rows' data: the writer isolates them as it does its own), ``("error", message)`` (anything else:
-the writer retries the batch with backoff).
+request then answer. Writer -> process: ``("open", url, compact)`` once, then ``("write",
+records, keys, reserve)`` (``records``: the batch's ``Record``s as tuples of their fields
+(``Fields``), which the process makes ``Record``s again; ``keys``: the database key of each of
+their Things; ``reserve``: Thing -> ``seq_reserved`` to set in the same transaction).
+Process -> writer: ``("ok",)``, ``("refused", message)`` (``RecordRefused``: the writer
+isolates the records as it does its own), ``("error", message)`` (anything else: a
+``HistoryError``, the writer retries the batch with backoff).
 
 The writer's thread starts the process when it starts (its imports take ~0.5 s: the first batch
 would wait for them). The process runs in its own session (a Ctrl-C or a SIGTERM to the hub's
@@ -31,35 +33,30 @@ import logging
 import os
 import subprocess
 import sys
+from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from wott_hub.errors import HistoryError
+from wott_hub.errors import HistoryError, RecordRefused
+from wott_hub.events.record import Record, SkinArrays
 
-if TYPE_CHECKING:
-    from sqlalchemy.engine import URL
-
-__all__ = ["BatchProcess", "BatchProcessError", "BatchRefused", "main"]
+__all__ = ["BatchProcess", "Fields", "fields_of", "main", "records_of"]
 
 log = logging.getLogger(__name__)
 
-Wire = tuple[int, int, int, int, str, str, "tuple[bytes, bytes] | None"]
-"""A record as it crosses: ``(thing_key, seq, t_ns, kind, name, data, skin)``."""
-
-
-class BatchProcessError(HistoryError):
-    """The process could not write the batch (its message), or is gone: retry later."""
-
-
-class BatchRefused(BatchProcessError):
-    """The database refused the batch's data: retrying the same rows can never succeed."""
+Fields = tuple[str, int, int, str, int, str, "tuple[bytes, bytes] | None"]
+"""A ``Record`` as it crosses: its fields in ``Record``'s order, the skin arrays as bytes
+(``SkinArrays.to_wire``). Pickled so, a batch costs the writer's side ~1.1 µs a record; as
+``Record``s (their ``__reduce__``) ~1.7 µs, and that side is the hub's process (measured)."""
 
 
 class BatchProcess:
-    """The writer thread's handle on the process: started when the thread starts, again after it exits."""
+    """The writer thread's handle on the process: started when the thread starts, again after it exits.
+    ``url``: the database (sent over the pipe, never in argv); ``compact``: as the writer's storage."""
 
-    def __init__(self, url: URL) -> None:
-        self._url = url.render_as_string(hide_password=False)  # sent over the pipe, never in argv
+    def __init__(self, url: str, compact: bool) -> None:
+        self._url = url
+        self._compact = compact
         self._proc: subprocess.Popen[bytes] | None = None
         self._to: Connection | None = None
         self._from: Connection | None = None
@@ -68,13 +65,14 @@ class BatchProcess:
     def pid(self) -> int | None:
         return None if self._proc is None else self._proc.pid
 
-    def commit(self, records: list[Wire], reserve: list[tuple[int, int]], compact: bool) -> None:
-        """Write ``records`` and ``reserve`` in one transaction; ``BatchRefused``/``BatchProcessError``."""
-        answer = self._ask(("commit", records, reserve, compact))
+    def write(self, records: Sequence[Record], keys: Mapping[str, int], reserve: Mapping[str, int]) -> None:
+        """Write ``records`` and move ``reserve`` in one transaction, as ``StorageWriter.write``
+        does: ``RecordRefused``, or ``HistoryError`` for anything else (the process gone too)."""
+        answer = self._ask(("write", fields_of(records), dict(keys), dict(reserve)))
         if answer[0] == "refused":
-            raise BatchRefused(answer[1])
+            raise RecordRefused(answer[1])
         if answer[0] != "ok":
-            raise BatchProcessError(answer[1])
+            raise HistoryError(answer[1])
 
     def _ask(self, msg: tuple[Any, ...]) -> tuple[Any, ...]:
         if self._to is None:
@@ -85,7 +83,7 @@ class BatchProcess:
             answer: tuple[Any, ...] = self._from.recv()
         except (EOFError, OSError) as e:
             code = self._reap()
-            raise BatchProcessError(f"the history process exited ({code}) before answering: {e!r}") from None
+            raise HistoryError(f"the history process exited ({code}) before answering: {e!r}") from None
         return answer
 
     def start(self) -> None:
@@ -102,16 +100,16 @@ class BatchProcess:
         except OSError as e:
             os.close(to_child)
             os.close(from_child)
-            raise BatchProcessError(f"cannot start the history process: {e}") from None
+            raise HistoryError(f"cannot start the history process: {e}") from None
         finally:
             os.close(from_hub)
             os.close(to_hub)
         self._to = Connection(to_child, readable=False)
         self._from = Connection(from_child, writable=False)
-        answer = self._ask(("open", self._url))
+        answer = self._ask(("open", self._url, self._compact))
         if answer[0] != "ok":
             self.close()
-            raise BatchProcessError(answer[1])
+            raise HistoryError(answer[1])
         log.debug("history process %d started", self._proc.pid)
 
     def _reap(self) -> int | None:
@@ -134,54 +132,52 @@ class BatchProcess:
         self._reap()
 
 
+def fields_of(records: Sequence[Record]) -> list[Fields]:
+    return [(r.thing, r.seq, r.kind, r.name, r.t_ns, r.data, None if r.skin is None else r.skin.to_wire())
+            for r in records]
+
+
+def records_of(fields: list[Fields]) -> list[Record]:
+    return [Record(thing, seq, kind, name, t_ns, data, None,
+                   None if skin is None else SkinArrays.from_wire(skin))
+            for thing, seq, kind, name, t_ns, data, skin in fields]
+
+
 # --- the process ------------------------------------------------------------------------
-
-def _rows(records: list[Wire], compact: bool) -> list[tuple[int, int, int, int, str, bytes]]:
-    from wott_hub.events.record import Record, SkinArrays
-
-    from .codec import encode_records
-
-    if compact:
-        recs = [Record("", seq, kind, name, t_ns, data, None,
-                       None if skin is None else SkinArrays.from_wire(skin))
-                for _, seq, t_ns, kind, name, data, skin in records]
-        payloads = encode_records(recs)
-    else:
-        payloads = [r[5].encode() for r in records]
-    return [(key, seq, t_ns, kind, name, p)
-            for (key, seq, t_ns, kind, name, _, _), p in zip(records, payloads, strict=True)]
-
 
 def main(read_fd: int, write_fd: int) -> None:
     """Answer the writer's requests until its pipe closes."""
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     from .db import create_engine
-    from .inserts import DATA_ERRORS, Inserter, one_line
+    from .db_errors import driver_message
+    from .engines import open_storage
 
     try:
-        _, url = inbox.recv()
+        _, url, compact = inbox.recv()
     except EOFError:
         return
     try:
-        inserter = Inserter(create_engine(url))
+        engine = create_engine(url)
+        storage = open_storage(engine, compact=compact)
     except Exception as e:
-        outbox.send(("error", f"the history process cannot open the database: {one_line(e)}"))
+        outbox.send(("error", f"the history process cannot open the database: {driver_message(e)}"))
         return
     outbox.send(("ok",))
     while True:
         try:
-            _, records, reserve, compact = inbox.recv()
+            _, fields, keys, reserve = inbox.recv()
         except EOFError:  # the writer stopped, or the hub is gone
             break
+        storage.keys.update(keys)
         try:
-            inserter.commit(_rows(records, compact), reserve)
-        except DATA_ERRORS as e:
-            outbox.send(("refused", one_line(e)))
+            storage.write(storage.prepare(records_of(fields)), reserve)
+        except RecordRefused as e:
+            outbox.send(("refused", str(e)))
         except Exception as e:
-            outbox.send(("error", one_line(e)))
+            outbox.send(("error", driver_message(e)))
         else:
             outbox.send(("ok",))
-    inserter.engine.dispose()
+    engine.dispose()
 
 
 if __name__ == "__main__":

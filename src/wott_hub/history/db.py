@@ -25,10 +25,12 @@ from sqlalchemy.engine import Engine
 
 from wott_hub.errors import HistoryError
 
+from .db_errors import database_error, translated
+
 if TYPE_CHECKING:
     from alembic.config import Config
 
-__all__ = ["HistoryError", "check_integrity", "create_engine", "current_revision", "database_url",
+__all__ = ["check_integrity", "create_engine", "current_revision", "database_url",
            "describe", "migrations_dir", "open_existing", "upgrade"]
 
 log = logging.getLogger(__name__)
@@ -112,16 +114,11 @@ def current_revision(engine: Engine) -> str | None:
     except sa.exc.OperationalError as e:
         if "no such table" in str(e) or "does not exist" in str(e):
             return None
-        raise _read_error(engine, e) from None
+        raise database_error(e, f"cannot read the history database {describe(engine.url)!r}") from None
     except sa.exc.ProgrammingError:  # PostgreSQL: relation "alembic_version" does not exist
         return None
     except sa.exc.DBAPIError as e:  # not a database, corrupted, unreachable
-        raise _read_error(engine, e) from None
-
-
-def _read_error(engine: Engine, e: Exception) -> HistoryError:
-    cause = getattr(e, "orig", None) or e
-    return HistoryError(f"cannot read the history database {describe(engine.url)!r}: {cause}")
+        raise database_error(e, f"cannot read the history database {describe(engine.url)!r}") from None
 
 
 def _known_revisions() -> tuple[list[str], str]:
@@ -173,8 +170,8 @@ def upgrade(engine: Engine) -> str:
             command.upgrade(cfg, "head")
             conn.commit()
     except sa.exc.SQLAlchemyError as e:
-        raise HistoryError(f"cannot open or upgrade the history database {describe(engine.url)!r}: "
-                           f"{getattr(e, 'orig', None) or e}") from None
+        raise database_error(e, f"cannot open or upgrade the history database {describe(engine.url)!r}") \
+            from None
     except Exception as e:  # Alembic's own errors (CommandError, ...): one line, not a traceback
         if isinstance(e, HistoryError):
             raise
@@ -212,12 +209,8 @@ def check_integrity(engine: Engine) -> None:
     storage: nothing to do."""
     if engine.dialect.name != "sqlite":
         return
-    try:
-        with engine.connect() as conn:
-            result = conn.exec_driver_sql("PRAGMA quick_check(1)").scalar()
-    except sa.exc.DBAPIError as e:
-        raise HistoryError(f"the history database {describe(engine.url)!r} is corrupted: "
-                           f"{getattr(e, 'orig', None) or e}") from None
+    with translated(f"the history database {describe(engine.url)!r} is corrupted"), engine.connect() as conn:
+        result = conn.exec_driver_sql("PRAGMA quick_check(1)").scalar()
     if result != "ok":
         problem = "; ".join(line for line in str(result).splitlines() if not line.startswith("***"))
         raise HistoryError(f"the history database {describe(engine.url)!r} is corrupted: {problem}")

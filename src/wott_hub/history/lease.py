@@ -39,9 +39,10 @@ from dataclasses import dataclass
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from wott_hub.errors import Conflict, HistoryError, InvalidInput
+from wott_hub.errors import Conflict, InvalidInput
 
 from .db import describe
+from .db_errors import translated
 from .models import HubLeaseRow
 
 __all__ = ["DEFAULT_HUB_ID", "LEASE_STALE_S", "Lease", "LeaseHolder", "check_hub_id", "live_holder",
@@ -144,7 +145,7 @@ class Lease:
             conn.execute(_T.insert().values(hub_id=self.hub_id))
 
     def holder(self) -> LeaseHolder | None:
-        with self.engine.connect() as conn:
+        with translated(), self.engine.connect() as conn:
             row = conn.execute(sa.select(_T.c.holder, _T.c.pid, _T.c.host, _T.c.heartbeat_ns)
                                .where(self._mine)).first()
         if row is None or row[0] is None:
@@ -164,7 +165,8 @@ class Lease:
 
     def acquire(self) -> None:
         """Take the lease or raise Conflict naming the database and the holder."""
-        try:
+        where = describe(self.engine.url)
+        with translated(f"cannot take the writer lease of the history database {where!r}"):
             with self.engine.begin() as conn:  # write first: SQLite takes its write lock at once
                 taken = self._take(conn)
                 if not taken and conn.execute(sa.select(_T.c.id).where(self._mine)).first() is None:
@@ -180,9 +182,6 @@ class Lease:
                         self.held, self.lost = True, ""
                         return
                 other = self.holder()
-        except sa.exc.SQLAlchemyError as e:
-            raise HistoryError(f"cannot take the writer lease of the history database "
-                               f"{describe(self.engine.url)!r}: {getattr(e, 'orig', None) or e}") from None
         who = str(other) if other is not None else "another process"
         same = "" if self.hub_id == DEFAULT_HUB_ID else f" with the same hub id {self.hub_id!r}"
         raise Conflict(f"the history database {describe(self.engine.url)!r} is in use by another hub{same}: "
@@ -192,7 +191,7 @@ class Lease:
         """Move the heartbeat; False (and ``lost`` says why) if another process took the lease."""
         if not self.held:
             return False
-        with self.engine.begin() as conn:
+        with translated(), self.engine.begin() as conn:
             res = conn.execute(_T.update().where(self._mine, _T.c.holder == self.me)
                                .values(heartbeat_ns=time.time_ns()))
             if res.rowcount == 1:
@@ -209,6 +208,6 @@ class Lease:
         if not self.held:
             return
         self.held = False
-        with self.engine.begin() as conn:
+        with translated(), self.engine.begin() as conn:
             conn.execute(_T.update().where(self._mine, _T.c.holder == self.me)
                          .values(holder=None, pid=None, host=None, heartbeat_ns=None, acquired_ns=None))

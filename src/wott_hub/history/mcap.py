@@ -30,7 +30,7 @@ from wott_hub.errors import NotFound
 from wott_hub.events.record import KIND_EVENT, KIND_NAMES, KIND_PROPERTY
 
 from .merge import merged_pages
-from .reader import HistoryReader
+from .storage import StorageReader
 
 __all__ = ["MESH_EVERY_S", "SCENE_UPDATE_SCHEMA", "ExportSummary", "export_mcap", "topic_of"]
 
@@ -175,7 +175,7 @@ def _schema_of(td: dict[str, Any] | None, kind: int, name: str) -> dict[str, Any
     return out
 
 
-def export_mcap(reader: HistoryReader, out: IO[bytes], things: Sequence[str], *,
+def export_mcap(reader: StorageReader, out: IO[bytes], things: Sequence[str], *,
                 t_from_ns: int | None = None, t_to_ns: int | None = None, names: list[str] | None = None,
                 scene: bool = True, scene_hz: float = 30.0, color_max_mm: float = 2.0) -> ExportSummary:
     """Write the records of ``things`` in [t_from, t_to] (time order across Things) to ``out``.
@@ -233,10 +233,11 @@ def export_mcap(reader: HistoryReader, out: IO[bytes], things: Sequence[str], *,
         writer.add_message(scene_ids[thing][1], t_ns, skins[thing].deformation(t_ns, packet), t_ns)
         summary.scene_messages += 1
 
-    for rows in merged_pages(reader, list(things), t_from_ns, t_to_ns, names):
-        for thing, seq, t, kind, name, data in rows:
+    for records in merged_pages(reader, list(things), t_from_ns, t_to_ns, names):
+        for rec in records:
+            thing, t, kind, name, data = rec.thing, rec.t_ns, rec.kind, rec.name, rec.data
             cid = channel(thing, kind, name)
-            writer.add_message(cid, t, data.encode(), t, sequence=seq & 0xFFFFFFFF)
+            writer.add_message(cid, t, data.encode(), t, sequence=rec.seq & 0xFFFFFFFF)
             summary.records += 1
             if thing not in skins:
                 continue

@@ -1,7 +1,8 @@
-"""Replay a recorded range as live records, with the original timing scaled.
+"""Replay a recorded range as live records, with the original timing scaled: play, in one place.
 
-The replay re-emits each record's payload unchanged (the JSON text as stored)
-at ``start + (t - t_first) / speed``; ``speed=0`` emits as fast as possible.
+The replay re-emits each record as read (``Record``: its Thing, seq, affordance and payload,
+the JSON text as stored; its ``t_ns`` the time it is emitted) at
+``start + (t - t_first) / speed``; ``speed=0`` emits as fast as possible.
 Pages are read in a worker thread one page ahead, so reading never delays
 emission. With ``loop`` the range starts again after its end, one mean record
 interval later.
@@ -10,28 +11,32 @@ Like ``ros2 bag play``: ``names`` keeps only those affordances (the topic filter
 several Things replay together on one time base (``merge.py``: the order in which
 they were recorded, whatever their rates), and ``offset_s`` starts that many seconds
 into the range (each loop cycle starts there again).
+
+A ``Replayer`` runs in a task of its own (``start``/``stop``, ``state``) or is awaited
+(``run``); what the records become (the hub's replay Things: ``hub/replay.py``) is its
+``emit``'s business.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 from collections.abc import Iterator, Sequence
-from itertools import islice, repeat
-from typing import Any
 
 from wott_hub.errors import InvalidInput
-from wott_hub.types import Emit, EmitFrom
+from wott_hub.events.record import Record
+from wott_hub.types import Emit
 
-from .merge import Row, merged_pages, resolve_range
-from .reader import Columns, HistoryReader
+from .merge import merged_pages
+from .storage import Columns, StorageReader
 
 __all__ = ["Replayer"]
 
 
 class Replayer:
-    def __init__(self, reader: HistoryReader, thing: str | Sequence[str], *, t_from_ns: int | None = None,
+    def __init__(self, reader: StorageReader, thing: str | Sequence[str], *, t_from_ns: int | None = None,
                  t_to_ns: int | None = None, speed: float = 1.0, loop: bool = False,
                  names: list[str] | None = None, page: int = 20_000, offset_s: float = 0.0) -> None:
         if not (speed >= 0 and math.isfinite(speed)):  # nan and inf too: they would never emit
@@ -42,7 +47,6 @@ class Replayer:
         self.things = [thing] if isinstance(thing, str) else list(thing)
         if not self.things:
             raise InvalidInput("replay needs at least one recorded device")
-        self.thing = self.things[0]
         self.t_from_ns = t_from_ns
         self.t_to_ns = t_to_ns
         self.offset_ns = int(offset_s * 1e9)
@@ -52,31 +56,61 @@ class Replayer:
         self.page = page
         self.emitted = 0
         self.cycles = 0
+        self.task: asyncio.Task[None] | None = None
+        self.ended = False
+
+    @property
+    def state(self) -> str:
+        """"running" (started or about to be), then "ended" (the range played, or stopped)."""
+        return "ended" if self.ended else "running"
+
+    def start(self, emit: Emit, *, name: str | None = None) -> asyncio.Task[None]:
+        """``run`` in a task of its own (``name``d), until the range ends (or ``stop``)."""
+
+        async def play() -> None:
+            try:
+                await self.run(emit)
+            finally:
+                self.ended = True
+
+        self.task = asyncio.create_task(play(), name=name)
+        return self.task
+
+    async def stop(self) -> None:
+        """Cancel the task ``start`` made and wait for it to end."""
+        task = self.task
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+
+    def _range(self) -> tuple[int | None, int | None]:
+        """The [from, to] actually read once the offset is applied (it counts from ``t_from_ns``, or
+        from the first record of any of the Things when that is open)."""
+        lo, hi = self.t_from_ns, self.t_to_ns
+        if not self.offset_ns:
+            return lo, hi
+        start = lo if lo is not None else self.reader.first_time(self.things, None)
+        if start is None:  # nothing recorded: the range stays empty either way
+            return lo, hi
+        return start + self.offset_ns, hi
+
+    def _pages(self, lo: int | None, hi: int | None) -> Iterator[Columns | list[Record]]:
+        """One Thing: its pages as ``Columns`` (a ``Record`` is made as each is emitted: cheaper than a
+        page of them, ``storage.Columns``); several: their records merged by time."""
+        if len(self.things) == 1:
+            return self.reader.columns(self.things[0], lo, hi, self.names, self.page)
+        return merged_pages(self.reader, self.things, lo, hi, self.names, self.page)
 
     async def run(self, emit: Emit, stop: asyncio.Event | None = None) -> int:
         """Emit until the range ends (or forever with ``loop``, until ``stop`` is set)."""
-        if len(self.things) == 1:
-            return await self._run(emit, None, stop)
-        return await self._run(None, lambda _thing, k, n, t, d: emit(k, n, t, d), stop)
-
-    async def run_from(self, emit: EmitFrom, stop: asyncio.Event | None = None) -> int:
-        """``run`` for several Things: ``emit`` is told which Thing each record belongs to."""
-        return await self._run(None, emit, stop)
-
-    def _pages(self, lo: int | None, hi: int | None, tagged: bool) -> Iterator[Columns | list[Row]]:
-        if tagged:
-            return merged_pages(self.reader, self.things, lo, hi, self.names, self.page)
-        return self.reader.columns(self.thing, lo, hi, self.names, self.page)
-
-    async def _run(self, emit: Emit | None, emit_from: EmitFrom | None, stop: asyncio.Event | None) -> int:
         loop = asyncio.get_running_loop()
-        lo, hi = await asyncio.to_thread(resolve_range, self.reader, self.things, self.t_from_ns,
-                                         self.t_to_ns, self.offset_ns)
-        tagged = emit_from is not None
+        lo, hi = await asyncio.to_thread(self._range)
         now = time.time_ns
+        thing = self.things[0]
         clock0: float | None = None
         while stop is None or not stop.is_set():
-            pages = self._pages(lo, hi, tagged)
+            pages = self._pages(lo, hi)
             nxt = asyncio.ensure_future(asyncio.to_thread(next, pages, None))
             t_first = t_last = None
             n_cycle = 0
@@ -88,37 +122,36 @@ class Replayer:
                 nxt = asyncio.ensure_future(asyncio.to_thread(next, pages, None))
                 if isinstance(page, Columns):
                     count, t0, t1 = len(page.data), page.times[0], page.times[-1]
-                    records: Iterator[tuple[Any, ...]] = zip(repeat(None), page.times, page.kinds, page.names,
-                                                             page.data, strict=False)  # repeat: endless
                 else:
-                    count, t0, t1 = len(page), page[0][2], page[-1][2]
-                    records = ((thing, t, kind, name, data) for thing, _seq, t, kind, name, data in page)
+                    count, t0, t1 = len(page), page[0].t_ns, page[-1].t_ns
                 if t_first is None:
                     t_first = t0
                     if clock0 is None:
                         clock0 = loop.time()
                 if self.speed == 0:  # as fast as possible: no clock, a yield every 2,000 records
-                    if emit is not None:  # one Thing: its columns zipped, no tuple per record
-                        assert isinstance(page, Columns)
-                        records = zip(page.kinds, page.names, page.data, strict=True)
-                    for done in range(2000, count + 2000, 2000):
-                        if emit is not None:
-                            for kind, name, data in islice(records, 2000):
-                                emit(kind, name, now(), data)
+                    for done in range(0, count, 2000):
+                        end = done + 2000
+                        if isinstance(page, Columns):
+                            for seq, kind, name, data in zip(page.seqs[done:end], page.kinds[done:end],
+                                                             page.names[done:end], page.data[done:end],
+                                                             strict=True):
+                                emit(Record(thing, seq, kind, name, now(), data))
                         else:
-                            assert emit_from is not None
-                            for thing, _t, kind, name, data in islice(records, 2000):
-                                emit_from(thing, kind, name, now(), data)
+                            for rec in page[done:end]:
+                                rec.t_ns = now()
+                                emit(rec)
                         await asyncio.sleep(0)
                         if stop is not None and stop.is_set():
                             nxt.cancel()
-                            self.emitted += min(count, done)
+                            self.emitted += min(count, done + 2000)
                             return self.emitted
                     n_cycle += count
                     self.emitted += count
                     t_last = t1
                     continue
-                for thing, t_ns, kind, name, data in records:
+                assert clock0 is not None  # set with t_first, on this page or an earlier one
+                for rec in page.records(thing) if isinstance(page, Columns) else page:
+                    t_ns = rec.t_ns
                     due = clock0 + (t_ns - t_first) / 1e9 / self.speed
                     delay = due - loop.time()
                     if delay > 0.0002:
@@ -126,11 +159,8 @@ class Replayer:
                         if stop is not None and stop.is_set():
                             nxt.cancel()
                             return self.emitted
-                    if emit_from is not None:
-                        emit_from(thing, kind, name, now(), data)
-                    else:
-                        assert emit is not None
-                        emit(kind, name, now(), data)
+                    rec.t_ns = now()
+                    emit(rec)
                     t_last = t_ns
                     n_cycle += 1
                     self.emitted += 1

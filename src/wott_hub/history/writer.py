@@ -2,26 +2,31 @@
 
 The event loop only appends records to a deque (``submit``: no lock, no I/O).
 The writer thread wakes every ``interval_s`` (or as soon as ``batch_max``
-records are waiting), writes everything pending in one ``executemany`` and
-one commit, moves each Thing's sequence reservation ahead in the same
-transaction, and reports the committed watermarks back to the event plane.
-A commit per event would cap SQLite at a few hundred events/s; a batch costs
-about as much as one event.
+records are waiting), writes everything pending in one transaction per batch,
+moves each Thing's sequence reservation ahead in the same transaction, and
+reports the committed watermarks back to the event plane. A commit per event
+would cap SQLite at a few hundred events/s; a batch costs about as much as one event.
+
+This is the part above the storage: queue, thread, batches, isolation of refused
+records, watermarks, reservations, lease keeping, health. What the database does
+with a batch is its storage engine's (``storage.StorageWriter``, chosen by the
+engine's dialect: ``engines.py``), as rosbag2's writer keeps its cache and its
+thread above its storage plugins.
 
 If the database cannot keep up, the queue is bounded by ``queue_max``: beyond
 it records are not recorded (counted in ``dropped``) rather than exhausting
 memory; live subscribers still get them.
 
 Contract (what keeps the writer from ever wedging):
-- A batch the database refuses for its *data* (a unique-key conflict, a value
-  it cannot store) is split in halves until the refused rows are isolated:
-  every other row is written, each refused one is counted in
-  ``failed_records``, named in ``last_error`` and given up on (its seq is
-  passed to ``on_commit`` like a written one, and listed in ``failed_seqs``).
-- Any other failure (locked, disk full, connection lost) keeps the rows not
+- A batch the database refuses for its *data* (``RecordRefused``: a unique-key
+  conflict, a value it cannot store, a Thing never registered) is split in halves
+  until the refused records are isolated: every other record is written, each
+  refused one is counted in ``failed_records``, named in ``last_error`` and given
+  up on (its seq is passed to ``on_commit`` like a written one, and listed in ``failed_seqs``).
+- Any other failure (locked, disk full, connection lost) keeps the records not
   yet written at the head of the queue and retries with backoff.
 - ``health()`` is "degraded" while batches fail, for ``degraded_s`` after a
-  row was refused, and while the database is known to be corrupted
+  record was refused, and while the database is known to be corrupted
   (``PRAGMA quick_check`` at start, or a read error); "failed" once another
   process took the writer lease (this writer then records nothing more).
 - With ``process=True`` (the hub's ``history_process``, on by default) each batch is encoded
@@ -45,20 +50,17 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
-from wott_hub.errors import Conflict, InvalidInput
+from wott_hub.errors import HistoryError, InvalidInput, RecordRefused
 from wott_hub.events.record import Record
 
-from .batch_process import BatchProcess, BatchProcessError, BatchRefused
-from .codec import encode_records
-from .db import HistoryError, check_integrity, describe
-from .inserts import DATA_ERRORS, Inserter, Prepared, Row, copy_data, one_line
-from .lease import DEFAULT_HUB_ID, LEASE_STALE_S, Lease, live_holder
-from .models import EventRow, ThingRow
-from .retention import Retention, apply_retention
-from .state import state_of
+from .batch_process import BatchProcess
+from .db_errors import driver_message
+from .engines import open_storage
+from .lease import DEFAULT_HUB_ID, LEASE_STALE_S
+from .retention import Retention
+from .storage import Prepared, Step, StorageWriter
 
 __all__ = ["HistoryWriter", "RESERVE"]
 
@@ -76,19 +78,12 @@ while PostgreSQL writes this one: below that the writer is keeping up."""
 _CATCH_UP = 20_000
 """Records waiting behind a batch from which the writer's thread writes it itself though it has a
 batch process: catching up matters more then than the event loop's share of the GIL. The
-process writes 29,000-54,000 records/s (the hand-over costs ~8 µs a record: the tuples, pickling,
-the pipe, unpickling), the thread 67,000-82,000 (docs/history.md); a hub keeping up has ~770
-waiting per 50 ms batch at 64 devices x 120 Hz."""
+process writes 29,000-54,000 records/s (the hand-over costs ~8 µs a record: pickling the
+records, the pipe, unpickling them), the thread 67,000-82,000 (docs/history.md); a hub keeping
+up has ~770 waiting per 50 ms batch at 64 devices x 120 Hz."""
 _ENCODE_SLICE = 1_000
 """Records encoded per step of ``_Ahead``: about 4 ms, well under the ~20 ms of work that a
 socket's buffer of COPY data gives PostgreSQL (and no dearer per record than a whole batch)."""
-
-class _Refused(Exception):
-    """A record that cannot be written at all (its Thing was never registered)."""
-
-
-def _unregistered(e: KeyError) -> _Refused:
-    return _Refused(f"Thing {e.args[0]!r} was never registered with the history writer")
 
 
 class HistoryWriter:
@@ -99,7 +94,8 @@ class HistoryWriter:
                  on_commit: Callable[[dict[str, int]], None] | None = None,
                  lease_stale_s: float = LEASE_STALE_S, integrity_check: bool = True,
                  hub_id: str = DEFAULT_HUB_ID, compact: bool = True, process: bool = False) -> None:
-        """``hub_id``: the identity of the hub this writer records for (its lease row, see
+        """``engine``: the database, written through its storage engine (``engines.open_storage``).
+        ``hub_id``: the identity of the hub this writer records for (its lease row, see
         ``lease.py``): hubs of different ids may share one database, each its own Things.
         ``compact``: skin packets stored packed (``codec.py``); False stores every payload as
         its UTF-8 text (what revision 0005 stored; the storage benchmark's "before")."""
@@ -108,13 +104,12 @@ class HistoryWriter:
             raise InvalidInput(f"history batch interval must be in (0, 60] s, got {interval_s!r}")
         if not (isinstance(batch_max, int) and 1 <= batch_max <= 1_000_000):
             raise InvalidInput(f"history batch size must be an integer in [1, 1000000], got {batch_max!r}")
-        self.engine = engine
+        self.storage = open_storage(engine, compact=compact, hub_id=hub_id, lease_stale_s=lease_stale_s)
         self.batch_max = batch_max
         self.interval_s = interval_s
         self.queue_max = min(queue_max, RESERVE // 2)
         self.retention = retention or Retention()
         self.on_commit = on_commit
-        self.keys: dict[str, int] = {}
         self.committed: dict[str, int] = {}
         self._reserved: dict[str, int] = {}
         self.submitted = 0
@@ -129,17 +124,15 @@ class HistoryWriter:
         """Seqs given up on per Thing (the plane drops them in ``committed`` mode, then discards them)."""
         self._failing = False  # the last batch attempt failed and is being retried
         self._last_refused = -1e9  # time.monotonic() of the last refused record
-        self._db = state_of(engine)
-        self.lease = Lease(engine, hub_id=hub_id, stale_s=lease_stale_s)
+        self._db = self.storage.state
+        self._lease = self.storage.lease
         self._next_refresh = 0.0
         self._integrity_check = integrity_check
         self._queue: deque[Record] = deque()
         self._wake = threading.Event()
         self._stop = False
         self._thread: threading.Thread | None = None
-        self._inserter = Inserter(engine)
-        self._process = BatchProcess(engine.url) if process else None  # batch_process.py
-        self.compact = compact
+        self._process = BatchProcess(self.storage.url, compact) if process else None  # batch_process.py
         self._next_retention = 0.0
 
     # --- Things -------------------------------------------------------------------
@@ -152,75 +145,30 @@ class HistoryWriter:
         call takes the database's writer lease: ``Conflict`` if another hub holds it.
         """
         self.acquire_lease()
-        for attempt in range(8):
-            try:
-                return self._register(thing, title, family, td, static_values)
-            except sa.exc.OperationalError as e:  # another process holds SQLite's write lock long
-                if "locked" not in str(e) or attempt == 7:
-                    raise
-                time.sleep(0.05 * 2 ** attempt)
-        raise AssertionError("unreachable")
+        start = self.storage.register(thing, title=title, family=family, td=td, static_values=static_values,
+                                      ahead=RESERVE)
+        self._reserved[thing] = start + RESERVE
+        self.committed[thing] = start
+        return start
 
     def acquire_lease(self) -> None:
         """Become the one writer of this database (``Conflict`` naming the holder if another
         process is). Done by the first ``register_thing``; a hub that must own the database
         before it registers anything (its directory shares it) calls it right after opening."""
-        if self.lease.held:
+        lease = self._lease
+        if lease.held:
             return
-        if self.lease.lost:
-            raise HistoryError(self.lease.lost)
-        self.lease.acquire()
-        self._next_refresh = time.monotonic() + self.lease.stale_s / 6
-
-    def _register(self, thing: str, title: str, family: str, td: str | None,
-                  static_values: str | None) -> int:
-        things = ThingRow.__table__
-        events = EventRow.__table__
-        now = time.time_ns()
-        with self.engine.begin() as conn:
-            # Write first: the transaction takes the write lock before it reads anything. (A
-            # read first pins a WAL snapshot, and SQLite refuses at once, without waiting, to
-            # turn a stale snapshot into a writer: "database is locked" under load.)
-            conn.execute(things.update().where(things.c.id == thing).values(updated_ns=now))
-            row = conn.execute(sa.select(things.c.key, things.c.seq_reserved, things.c.hub_id)
-                               .where(things.c.id == thing)).first()
-            mine = self.lease.hub_id
-            if row is not None and row[2] not in (None, mine):
-                other = live_holder(conn, row[2], self.lease.stale_s)
-                if other is not None:
-                    raise Conflict(f"the Thing {thing!r} is recorded in the history database "
-                                   f"{describe(self.engine.url)!r} by hub {row[2]!r} ({other}): two "
-                                   "hubs cannot record the same Thing id; give each hub its own identity")
-            values = {"title": title or thing, "family": family, "updated_ns": now, "hub_id": mine}
-            if td is not None:
-                values["td"] = td
-            if static_values is not None:
-                values["static_values"] = static_values
-            if row is None:
-                key = conn.execute(things.insert().values(id=thing, seq_reserved=0, **values)
-                                   .returning(things.c.key)).scalar_one()
-                reserved = 0
-            else:
-                key, reserved = row[0], row[1]
-                conn.execute(things.update().where(things.c.key == key).values(**values))
-            last = conn.execute(sa.select(sa.func.max(events.c.seq))
-                                .where(events.c.thing_key == key)).scalar() or 0
-            start = max(reserved, last)
-            # reserve before the first record is handed out: a crash before the first
-            # commit must not let the next run reuse numbers clients have seen
-            conn.execute(things.update().where(things.c.key == key)
-                         .values(seq_reserved=start + RESERVE))
-        self.keys[thing] = key
-        self._reserved[thing] = start + RESERVE
-        self.committed[thing] = start
-        return start
+        if lease.lost:
+            raise HistoryError(lease.lost)
+        lease.acquire()
+        self._next_refresh = time.monotonic() + lease.stale_s / 6
 
     # --- the queue ----------------------------------------------------------------
 
     def submit(self, rec: Record) -> None:
         q = self._queue
         self.submitted += 1
-        if len(q) >= self.queue_max or self.lease.lost:
+        if len(q) >= self.queue_max or self._lease.lost:
             self.dropped += 1
             self.failed_seqs.setdefault(rec.thing, set()).add(rec.seq)
             return
@@ -244,7 +192,7 @@ class HistoryWriter:
 
     def _check_integrity(self) -> None:
         try:
-            check_integrity(self.engine)
+            self.storage.check_integrity()
         except HistoryError as e:
             self._db.integrity = str(e)
             log.error("%s", e)
@@ -262,8 +210,8 @@ class HistoryWriter:
         db = self._db
         now = time.monotonic()
         state, reason = "ok", ""
-        if self.lease.lost:
-            state, reason = "failed", self.lease.lost
+        if self._lease.lost:
+            state, reason = "failed", self._lease.lost
         elif db.corrupted:
             state, reason = "degraded", db.corrupted
         elif self._failing:
@@ -276,7 +224,7 @@ class HistoryWriter:
         return {"state": state, "reason": reason, "written": self.written, "queued": self.queue_depth,
                 "dropped": self.dropped, "failedRecords": self.failed_records, "errors": self.errors,
                 "lastError": self.last_error, "readErrors": db.read_errors,
-                "integrity": db.integrity or "unchecked", "lease": self.lease.held}
+                "integrity": db.integrity or "unchecked", "lease": self._lease.held}
 
     def stop(self, timeout_s: float = 30.0) -> None:
         """Write everything queued, mark clean shutdown (no sequence gap on restart), stop."""
@@ -293,7 +241,7 @@ class HistoryWriter:
             self._process.close()
         self._release_reservations()
         try:
-            self.lease.release()
+            self._lease.release()
         except Exception as e:  # the next hub takes it over once stale (or at once: this pid is gone)
             log.warning("could not release the history writer lease: %s", e)
 
@@ -316,7 +264,7 @@ class HistoryWriter:
         if self._process is not None:
             try:
                 self._process.start()
-            except BatchProcessError as e:  # the first batch starts it again, or reports why not
+            except HistoryError as e:  # the first batch starts it again, or reports why not
                 log.warning("%s", e)
         while True:
             stopping = self._stop
@@ -328,10 +276,10 @@ class HistoryWriter:
                 if time.monotonic() >= self._next_retention:
                     self._next_retention = time.monotonic() + self.retention.check_every_s
                     if self.retention.active:
-                        apply_retention(self.engine, self.retention)
+                        self.storage.apply_retention(self.retention)
             except Exception as e:  # keep recording: a failed batch is logged, the rest retried
                 self.errors += 1
-                self.last_error = one_line(e)
+                self.last_error = driver_message(e)
                 self._failing = True
                 if "database disk image is malformed" in self.last_error:
                     self._db.read_failed(self.last_error)
@@ -348,11 +296,12 @@ class HistoryWriter:
             self._wake.clear()
 
     def _refresh_lease(self) -> None:
-        if not self.lease.held or time.monotonic() < self._next_refresh:
+        lease = self._lease
+        if not lease.held or time.monotonic() < self._next_refresh:
             return
-        self._next_refresh = time.monotonic() + self.lease.stale_s / 6
-        if not self.lease.refresh():
-            log.error("%s", self.lease.lost)
+        self._next_refresh = time.monotonic() + lease.stale_s / 6
+        if not lease.refresh():
+            log.error("%s", lease.lost)
             self._give_up_queue()
 
     def _give_up_queue(self) -> None:
@@ -369,22 +318,23 @@ class HistoryWriter:
 
     def _write_pending(self) -> None:
         """Write the queue batch by batch, each by the batch process if there is one and fewer than
-        ``_CATCH_UP`` records wait behind it, else here. Here, on PostgreSQL, while more records
-        wait, the next batch is taken too and its payloads encoded (``codec.py``, Python: about as
-        costly as the server's work) a slice at a time, then its COPY data built, while the server works
-        through this batch's COPY data: the two costs overlap instead of adding up. In this
-        thread, between its socket writes, not in another one: a second thread would hold the
-        GIL while the socket waits for more data, and each hand-over takes up to the
-        interpreter's 5 ms switch interval (measured: no faster than without overlap)."""
+        ``_CATCH_UP`` records wait behind it, else here. Here, with a storage that ``overlaps``
+        (PostgreSQL), while more records wait, the next batch is taken too and its payloads
+        encoded (``codec.py``, Python: about as costly as the server's work) a slice at a time,
+        then its rows prepared, while the server works through this batch's data: the two
+        costs overlap instead of adding up. In this thread, between its socket writes, not in
+        another one: a second thread would hold the GIL while the socket waits for more data,
+        and each hand-over takes up to the interpreter's 5 ms switch interval (measured: no
+        faster than without overlap)."""
         q = self._queue
         batch: list[Record] = []
         encoded: _Ahead | None = None
-        while (batch or q) and not self.lease.lost:
+        while (batch or q) and not self._lease.lost:
             if not batch:
                 batch, encoded = self._take(), None
             process = self._process if encoded is None and len(q) < _CATCH_UP else None
-            ahead = _Ahead(self._payloads, self._prepare, self._take()) \
-                if self._inserter.copy and process is None and len(q) >= _AHEAD_MIN else None
+            ahead = _Ahead(self.storage, self._take()) \
+                if self.storage.overlaps and process is None and len(q) >= _AHEAD_MIN else None
             self._write_isolating(batch, encoded, ahead, process)
             batch, encoded = ([], None) if ahead is None else (ahead.batch, ahead)
         if batch:  # taken ahead when the lease was lost: back in the queue, given up with it
@@ -396,13 +346,13 @@ class HistoryWriter:
 
     def _write_isolating(self, batch: list[Record], encoded: _Ahead | None = None,
                          ahead: _Ahead | None = None, process: BatchProcess | None = None) -> None:
-        """Write ``batch`` (``encoded``: its payloads, encoded ahead; ``process``: by it); rows the
+        """Write ``batch`` (``encoded``: its payloads, encoded ahead; ``process``: by it); records the
         database refuses for their data are isolated by halving (log2(n) extra transactions per
-        refused row) and given up on, the others written. Any other error puts every row not yet
-        written back at the head of the queue, followed by ``ahead``'s (the next batch, taken and
-        being encoded while this one is written)."""
+        refused record) and given up on, the others written. Any other error puts every record
+        not yet written back at the head of the queue, followed by ``ahead``'s (the next batch,
+        taken and being encoded while this one is written)."""
         todo: list[tuple[list[Record], list[bytes] | None]] = []  # a stack, left halves on top:
-        part: list[Record] = batch  # rows are written in seq order
+        part: list[Record] = batch  # records are written in seq order
         prepared = None if encoded is None else encoded.prepared  # for the whole batch only
         try:
             todo.append((batch, None if encoded is None else encoded.result()))
@@ -411,7 +361,7 @@ class HistoryWriter:
                 try:
                     self._write(part, payloads, None if ahead is None else ahead.step,
                                 prepared if part is batch else None, process)
-                except (*DATA_ERRORS, _Refused, BatchRefused) as e:
+                except RecordRefused as e:
                     if len(part) == 1:
                         self._refuse(part[0], e)
                         continue
@@ -428,50 +378,30 @@ class HistoryWriter:
     def _refuse(self, rec: Record, e: Exception) -> None:
         self.failed_records += 1
         self._last_refused = time.monotonic()
-        self.last_error = f"{rec.thing} seq {rec.seq} not recorded: {one_line(e)}"
+        self.last_error = f"{rec.thing} seq {rec.seq} not recorded: {driver_message(e)}"
         log.error("history: %s", self.last_error)
         self.failed_seqs.setdefault(rec.thing, set()).add(rec.seq)
         self.committed[rec.thing] = max(self.committed.get(rec.thing, 0), rec.seq)
         if self.on_commit is not None:
             self.on_commit({rec.thing: rec.seq})
 
-    def _payloads(self, batch: Sequence[Record]) -> list[bytes]:
-        """The bytes stored for each record's payload."""
-        return encode_records(batch) if self.compact else [r.data.encode() for r in batch]
-
-    def _rows(self, batch: Sequence[Record], payloads: list[bytes]) -> list[Row]:
-        keys = self.keys
-        try:
-            return [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, d)
-                    for r, d in zip(batch, payloads, strict=True)]
-        except KeyError as e:
-            raise _unregistered(e) from None
-
-    def _prepare(self, batch: Sequence[Record], payloads: list[bytes]) -> Prepared:
-        rows = self._rows(batch, payloads)
-        return rows, copy_data(rows)
-
-    def _write(self, batch: list[Record], payloads: list[bytes] | None = None,
-               meanwhile: Callable[[], bool] | None = None, prepared: Prepared | None = None,
-               process: BatchProcess | None = None) -> None:
-        """One transaction, here or in ``process``; ``meanwhile``: work to do in steps while
-        PostgreSQL takes the COPY data (it returns False when done); ``prepared``: the batch's rows
-        and COPY data."""
+    def _write(self, batch: list[Record], payloads: list[bytes] | None = None, meanwhile: Step | None = None,
+               prepared: Prepared | None = None, process: BatchProcess | None = None) -> None:
+        """One transaction, here or in ``process``; ``meanwhile``: work to do in steps while the
+        database takes the data (it returns False when done); ``prepared``: the batch, ready."""
         t0 = time.perf_counter()
-        keys = self.keys
-        if process is not None:  # the records as they are: the process encodes them
-            try:
-                wire = [(keys[r.thing], r.seq, r.t_ns, r.kind, r.name, r.data,
-                         None if r.skin is None else r.skin.to_wire()) for r in batch]
-            except KeyError as e:
-                raise _unregistered(e) from None
-        elif prepared is None:
-            rows, copy = self._rows(batch, self._payloads(batch) if payloads is None else payloads), None
-        else:
-            rows, copy = prepared
+        storage = self.storage
         tops: dict[str, int] = {}
         for r in batch:
             tops[r.thing] = r.seq  # records of one Thing arrive in seq order
+        if process is not None:  # the records as they are: the process encodes them
+            try:
+                keys = {thing: storage.keys[thing] for thing in tops}
+            except KeyError as e:
+                raise RecordRefused(f"Thing {e.args[0]!r} was never registered with the history writer") \
+                    from None
+        elif prepared is None:
+            prepared = storage.prepare(batch, payloads)
         # Invariant: every seq handed out is <= the reservation. At most queue_max
         # (<= RESERVE/2) records wait in the queue and two batches are taken from it
         # (this one and the next, encoded ahead), so moving the reservation when less
@@ -479,11 +409,11 @@ class HistoryWriter:
         # the default; larger ones move it every batch); one UPDATE per ~450k records.
         reserve = {thing: top + RESERVE for thing, top in tops.items()
                    if top > self._reserved[thing] - RESERVE // 2 - 2 * self.batch_max}
-        by_key = [(keys[thing], seq) for thing, seq in reserve.items()]
         if process is not None:
-            process.commit(wire, by_key, self.compact)
+            process.write(batch, keys, reserve)
         else:
-            self._inserter.commit(rows, by_key, meanwhile, copy)
+            assert prepared is not None
+            storage.write(prepared, reserve, meanwhile)
         self._reserved.update(reserve)
         self.committed.update(tops)
         self.written += len(batch)
@@ -494,38 +424,33 @@ class HistoryWriter:
 
     def _release_reservations(self) -> None:
         """After a clean stop, the next run continues right after the last committed seq."""
-        if self._queue or not self.lease.held:
+        if self._queue or not self._lease.held:
             return  # not everything was written, or not ours to change: keep the reservation
-        things = ThingRow.__table__
         try:
-            with self.engine.begin() as conn:
-                for thing, seq in self.committed.items():
-                    conn.execute(things.update().where(things.c.key == self.keys[thing])
-                                 .values(seq_reserved=seq))
-                    self._reserved[thing] = seq
+            self.storage.release(self.committed)
         except Exception:
             log.exception("could not release sequence reservations (the next run skips ahead)")
+        else:
+            self._reserved.update(self.committed)
 
 
 class _Ahead:
     """The next batch, its payloads encoded a slice at a time (``step``) while the current batch
-    is written, then its rows and COPY data built (``prepared``); ``result`` encodes what is
-    left. An error encoding is kept for ``result``: it belongs to this batch, not to the one
-    being written; one preparing leaves ``prepared`` None (``_write`` prepares it again and
-    raises it, for that batch)."""
+    is written, then prepared (``prepared``); ``result`` encodes what is left. An error encoding
+    is kept for ``result``: it belongs to this batch, not to the one being written; one preparing
+    leaves ``prepared`` None (``_write`` prepares it again and raises it, for that batch)."""
 
-    def __init__(self, encode: Callable[[Sequence[Record]], list[bytes]],
-                 prepare: Callable[[Sequence[Record], list[bytes]], Prepared], batch: list[Record]) -> None:
+    def __init__(self, storage: StorageWriter, batch: list[Record]) -> None:
         self.batch = batch
         self.prepared: Prepared | None = None
-        self._encode = encode
-        self._prepare: Callable[[Sequence[Record], list[bytes]], Prepared] | None = prepare
+        self._encode: Callable[[Sequence[Record]], list[bytes]] = storage.encode
+        self._prepare: Callable[[Sequence[Record], list[bytes]], Prepared] | None = storage.prepare
         self._parts: list[list[bytes]] = []
         self._done = 0
         self._error: Exception | None = None
 
     def step(self) -> bool:
-        """Encode one more slice, or prepare the rows once all are; False once nothing is left."""
+        """Encode one more slice, or prepare the batch once all are; False once nothing is left."""
         if self._error is not None:
             return False
         if self._done >= len(self.batch):

@@ -23,14 +23,12 @@ from __future__ import annotations
 
 import asyncio
 import functools
-import json
 import math
 import tempfile
 from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.errors import InvalidInput, NotFound
-from wott_hub.events.record import KIND_NAMES
 
 from .actions import Stream
 from .actions import install as install_actions
@@ -160,7 +158,7 @@ async def _devices(history: HubHistory, x: dict[str, Any]) -> list[dict[str, Any
 
 
 async def _records(history: HubHistory, x: dict[str, Any]) -> Stream:
-    from wott_hub.history.query import record_page
+    from wott_hub.history.export import jsonl
 
     device = x.get("device")
     if not isinstance(device, str) or not device:
@@ -170,20 +168,18 @@ async def _records(history: HubHistory, x: dict[str, Any]) -> Stream:
     after = _int(x.get("after"), "after", 0, 0, (1 << 63) - 1)
     limit = _int(x.get("limit"), "limit", 1000, 1, MAX_LIMIT)
     reader = _reader(history)
-    head = '{"thing":' + json.dumps(device) + ',"seq":'
 
     async def pages(after: int) -> AsyncIterator[str]:
         left = limit
         while left > 0:
-            rows = await asyncio.to_thread(record_page, reader, device, t_from_ns=lo, t_to_ns=hi, names=names,
-                                           after=after, limit=min(left, 5000))
-            if not rows:
+            records = await asyncio.to_thread(reader.record_page, device, t_from_ns=lo, t_to_ns=hi,
+                                              names=names, after=after, limit=min(left, 5000))
+            if not records:
                 break
-            yield "".join(f'{head}{seq},"t_ns":{t},"kind":"{KIND_NAMES.get(k, k)}","name":'
-                          f'{json.dumps(n)},"data":{d}}}\n' for seq, t, k, n, d in rows)
-            left -= len(rows)
-            after = rows[-1][0]
-            if len(rows) < 5000:
+            yield jsonl(records)
+            left -= len(records)
+            after = records[-1].seq
+            if len(records) < 5000:
                 break
 
     return Stream(JSONL, pages(after))

@@ -69,11 +69,11 @@ class HubHistory:
     async def attach(self, served: ServedThing, family: str) -> bool:
         """Record the Thing's TD and continue its sequence where history says (before any record);
         False (and the Thing is not recorded) when history is off or it is not to be recorded."""
-        st = self.plane.stream(served.id)
         if not served.record or self.writer is None:
-            st.record = served.record = False
+            served.record = False
+            self.plane.continue_after(served.id, None, record=False)
             return False
-        st.seq = st.committed = await self.register(served, family)
+        self.plane.continue_after(served.id, await self.register(served, family), record=True)
         return True
 
     async def close(self) -> None:

@@ -17,13 +17,12 @@ the Thing's in-memory ring).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.errors import Conflict, InvalidInput, NotFound, WottHubError
-from wott_hub.events.record import KIND_PROPERTY
+from wott_hub.events.record import KIND_PROPERTY, Record
 from wott_hub.history.times import parse_time
 from wott_hub.runtime.pipeline import CONTACTS, NO_CONTACTS, NO_UNAVAILABLE, UNAVAILABLE
 from wott_hub.servient import ServedThing, with_forms
@@ -33,7 +32,7 @@ from .actions import install as install_actions
 if TYPE_CHECKING:
     from wott_hub.config import HubConfig
     from wott_hub.events.plane import EventPlane
-    from wott_hub.history import Replayer
+    from wott_hub.history.replay import Replayer
 
     from .recording import HubHistory
     from .things import Things
@@ -115,18 +114,24 @@ ACTIONS: dict[str, dict[str, Any]] = {
 
 @dataclass(eq=False)
 class ReplayRuntime:
-    """One replay Thing: what it replays, its task, the last contacts it emitted."""
+    """One replay Thing: what it replays, the replayer that plays it, the last contacts it emitted."""
 
     id: str
     source: str
     thing: ServedThing
     replayer: Replayer
-    task: asyncio.Task[None] | None = None
     contacts_json: str = NO_CONTACTS
     unavailable_json: str = NO_UNAVAILABLE  # the recorded device's unavailableNodes, as replayed
-    state: str = "running"
     group: list[ReplayRuntime] = field(default_factory=list, repr=False)
     """Every replay Thing one replayer drives (itself first); stopping one stops them all."""
+
+    @property
+    def task(self) -> asyncio.Task[None] | None:
+        return self.replayer.task
+
+    @property
+    def state(self) -> str:
+        return self.replayer.state
 
 
 class Replays:
@@ -196,30 +201,21 @@ class Replays:
         return rt
 
     def start(self, rt: ReplayRuntime) -> asyncio.Task[None]:
-        """Start the replayer of ``rt`` (and of every replay Thing of its group)."""
+        """Start the replayer of ``rt`` (and of every replay Thing of its group): each record goes to
+        the replay Thing of the device it was recorded for."""
         plane = self.plane
-        group = rt.group or [rt]
-        by_source = {g.source: g for g in group}
+        by_source = {g.source: g for g in rt.group or [rt]}
 
-        def emit(source: str, kind: int, name: str, t_ns: int, data: str) -> None:
-            target = by_source[source]
-            if kind == KIND_PROPERTY and name == CONTACTS:
-                target.contacts_json = data
-            elif kind == KIND_PROPERTY and name == UNAVAILABLE:
-                target.unavailable_json = data
-            plane.publish(target.id, kind, name, t_ns, data)
+        def emit(rec: Record) -> None:
+            target = by_source[rec.thing]
+            if rec.kind == KIND_PROPERTY:
+                if rec.name == CONTACTS:
+                    target.contacts_json = rec.data
+                elif rec.name == UNAVAILABLE:
+                    target.unavailable_json = rec.data
+            plane.publish(target.id, rec.kind, rec.name, rec.t_ns, rec.data)
 
-        async def run() -> None:
-            try:
-                await rt.replayer.run_from(emit)
-            finally:
-                for g in group:
-                    g.state = "ended"
-
-        task = asyncio.create_task(run(), name=f"replay:{rt.id}")
-        for g in group:
-            g.task = task
-        return task
+        return rt.replayer.start(emit, name=f"replay:{rt.id}")
 
     async def replay(self, device: Any, *, t_from: Any = None, t_to: Any = None, speed: Any = 1.0,
                      loop: Any = False, with_devices: Any = None, names: Any = None,
@@ -259,10 +255,7 @@ class Replays:
         rt = self.running.get(thing_id)
         if rt is None:
             return {"stopped": False, "emitted": 0}
-        if rt.task is not None:
-            rt.task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await rt.task
+        await rt.replayer.stop()
         for g in rt.group or [rt]:  # one replayer drives the group: it stops as a whole
             if self.running.pop(g.id, None) is not None:
                 self.things.unserve(g.id)
