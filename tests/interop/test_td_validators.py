@@ -52,7 +52,7 @@ def contexts(fleet, shared_data, tmp_path_factory) -> dict[str, Path]:
 
 
 @pytest.fixture(scope="module")
-def served_tds(fleet) -> dict[str, dict[str, Any]]:
+def served_tds(fleet, eventually) -> dict[str, dict[str, Any]]:
     """Every TD the demo hub serves, by where it was read, with a replay Thing running meanwhile."""
     with httpx.Client(base_url=fleet.url, timeout=10) as c:
         hub = c.get("/wot/hub").json()
@@ -62,7 +62,14 @@ def served_tds(fleet) -> dict[str, dict[str, Any]]:
         try:
             tds = {f"/wot/{i}": c.get(path).json() for i, path in c.get("/wot").json().items()}
             tds["/.well-known/wot"] = c.get("/.well-known/wot").json()
-            tds.update({f"/things/{td['id']}": td for td in c.get("/things").json()})
+            replay_id = tds[f"/wot/{r.json()['thing']}"]["id"]
+
+            def listed() -> list[dict[str, Any]] | None:  # the directory registers a new Thing a moment later
+                things = c.get("/things").json()
+                return things if replay_id in {td["id"] for td in things} else None
+
+            tds.update({f"/things/{td['id']}": td
+                        for td in eventually(listed, what="the replay Thing in the directory")})
         finally:
             c.post(hub["actions"]["stopReplay"]["forms"][0]["href"], json={"device": device})
     replay = r.json()["thing"]
