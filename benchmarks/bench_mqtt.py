@@ -167,7 +167,7 @@ async def _connected(hub) -> None:
     """The publisher's connection is up (its queue may be streaming: the subscriber says when the
     messages flow)."""
     for _ in range(400):
-        if hub.mqtt.connected:
+        if hub._mqtt.connected:
             return
         await asyncio.sleep(0.025)
     raise RuntimeError(f"the hub did not connect to the broker: {hub.health().get('mqtt')}")
@@ -175,9 +175,9 @@ async def _connected(hub) -> None:
 
 async def _sent(hub, deadline_s: float = 60.0) -> None:
     """What the hub queued so far is on the socket: (the publisher counts a batch once it is)."""
-    target = hub.mqtt.published + len(hub.mqtt.queue)
+    target = hub._mqtt.published + len(hub._mqtt.queue)
     end = time.monotonic() + deadline_s
-    while hub.mqtt.published < target and hub.mqtt.connected and time.monotonic() < end:
+    while hub._mqtt.published < target and hub._mqtt.connected and time.monotonic() < end:
         await asyncio.sleep(0.01)
 
 
@@ -199,7 +199,7 @@ async def throughput(broker: Mosquitto, tmp: Path, rates: list[int], seconds: fl
     async with Hub(hub_config(broker, tmp, history=False)) as hub:
         await hub.expose_thing("source", SOURCE_TD)
         await _connected(hub)
-        plane = hub.plane
+        plane = hub._plane
         k = 0
         for rate in [*rates, 0]:  # 0: as fast as the plane takes them
             sub = Subscriber(broker.port, f"wott/{hub.hub_id}/source/events/{EVENT}")
@@ -221,7 +221,7 @@ async def throughput(broker: Mosquitto, tmp: Path, rates: list[int], seconds: fl
             span_s = (got[-1][2] - got[0][2]) / 1e9 if len(got) > 1 else float("nan")
             rows.append(["max" if not rate else f"{rate:,}", f"{(k - first) / offered_s:,.0f}",
                          f"{len(received) / span_s:,.0f}" if span_s == span_s else "-", k - first, lost,
-                         hub.mqtt.dropped])
+                         hub._mqtt.dropped])
             print(f"throughput offered {rows[-1][0]}/s: sent {k - first}, received {len(received)}, "
                   f"lost {lost}, at the subscriber {rows[-1][2]}/s", flush=True)
     return rows
@@ -236,7 +236,7 @@ async def latency(broker: Mosquitto, tmp: Path, n_dev: int, seconds: float, imme
     from wott_hub.hub import Hub
 
     hub = Hub(hub_config(broker, tmp, history=True, immediate=immediate))
-    hub.plane.trace = True
+    hub._plane.trace = True
     await hub.start()
     try:
         base = example_device("flat")
@@ -258,23 +258,23 @@ async def latency(broker: Mosquitto, tmp: Path, n_dev: int, seconds: float, imme
         for did in ids:
             await hub.add_driver(Driver(replace(base, id=did, title=did), frames, 120.0,
                                         phase_s=random.random() / 120))
-            hub.plane.add_tap(did, Keep(did))
+            hub._plane.add_tap(did, Keep(did))
         await _connected(hub)
         sub = Subscriber(broker.port, f"wott/{hub.hub_id}/+/events/{EVENT}", expect=n_dev)
         await sub.expect("ready")
         await sub.expect("flowing")
         await asyncio.sleep(1.0)  # warm-up
-        pub0, queued0, cpu0 = hub.mqtt.published, len(hub.mqtt.queue), time.process_time()
+        pub0, queued0, cpu0 = hub._mqtt.published, len(hub._mqtt.queue), time.process_time()
         t0 = time.perf_counter_ns()
         await asyncio.sleep(seconds)
         t1 = time.perf_counter_ns()
-        pub1, queued1, cpu1 = hub.mqtt.published, len(hub.mqtt.queue), time.process_time()
+        pub1, queued1, cpu1 = hub._mqtt.published, len(hub._mqtt.queue), time.process_time()
         last: dict[str, int] = {}
         for (thing, ts), t_in in stamps.items():
             if t0 <= t_in < t1:
                 last[thing] = max(ts, last.get(thing, ts))
         got = await sub.result(last)
-        dropped = hub.mqtt.dropped
+        dropped = hub._mqtt.dropped
     finally:
         await hub.stop()
     window_s = (t1 - t0) / 1e9

@@ -51,14 +51,14 @@ class BenchHub:
     def subscribed(self) -> bool:
         from wott_hub.events.record import KIND_EVENT
 
-        return all(self.hub.plane.streams[t].interested(KIND_EVENT, EVENT) for t in self.ids)
+        return all(self.hub._plane.streams[t].interested(KIND_EVENT, EVENT) for t in self.ids)
 
     async def publish_at(self, rate: float, duration: float) -> dict[str, list[int]]:
         """``rate`` records/s in all, round-robin over the Things, in 5 ms bursts, each stamped with the
         wall clock at publication; returns each Thing's published seqs."""
         from wott_hub.events.record import KIND_EVENT
 
-        plane, make = self.hub.plane, packet_maker(self.n_nodes)
+        plane, make = self.hub._plane, packet_maker(self.n_nodes)
         seqs: dict[str, list[int]] = {t: [] for t in self.ids}
         n, t0 = 0, time.monotonic()
         while (elapsed := time.monotonic() - t0) < duration:

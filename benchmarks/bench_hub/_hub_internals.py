@@ -26,12 +26,12 @@ __all__ = ["DeviceConfig", "Driver", "EventPlane", "HubServer", "Prebound", "Ser
 
 def hub_plane(hub: Any) -> EventPlane:
     """The hub's event plane (tracing switch, per-Thing taps, publish, counters)."""
-    return hub.plane
+    return hub._plane
 
 
 def hub_writer(hub: Any) -> Any:
     """The hub's history writer (``flush``, ``written``)."""
-    return hub.writer
+    return hub._history.writer
 
 
 def replace_processing(device: Any, process: Any) -> None:

@@ -3,7 +3,9 @@
 This module is the face for a program that embeds the hub: build a
 ``HubConfig`` (``HubConfig.load(path)`` for a TOML file, or the constructor
 with ``DeviceConfig``s), then ``await serve(config)`` or drive a ``Hub``
-yourself; every error the hub raises on purpose is a ``WottHubError``.
+yourself (devices from the registry or your own ``Driver``, Things of your own
+with ``Hub.expose_thing`` and ``Hub.publish``); every error the hub raises on
+purpose is a ``WottHubError``.
 A driver-plugin author imports from ``wott_hub.plugin_api`` instead.
 These two modules are the public API; every other module of the package is
 internal and may change in any release (docs/plugins.md, "What is public").
@@ -23,6 +25,7 @@ __version__ = "0.1.0"
 
 if TYPE_CHECKING:
     from wott_hub.config import HubConfig
+    from wott_hub.drivers.base import Driver
     from wott_hub.errors import (
         ConfigError,
         Conflict,
@@ -30,7 +33,9 @@ if TYPE_CHECKING:
         HistoryError,
         InvalidInput,
         NotFound,
+        RecordRefused,
         SettingsError,
+        WorkerDied,
         WottHubError,
     )
     from wott_hub.hub.lifecycle import Hub
@@ -43,6 +48,7 @@ _LAZY = {
     "serve": "wott_hub.hub",
     "HubConfig": "wott_hub.config",
     "DeviceConfig": "wott_hub.plugins.model",
+    "Driver": "wott_hub.drivers.base",
     "WottHubError": "wott_hub.errors",
     "ConfigError": "wott_hub.errors",
     "Conflict": "wott_hub.errors",
@@ -50,20 +56,25 @@ _LAZY = {
     "HistoryError": "wott_hub.errors",
     "InvalidInput": "wott_hub.errors",
     "NotFound": "wott_hub.errors",
+    "RecordRefused": "wott_hub.errors",
     "SettingsError": "wott_hub.errors",
+    "WorkerDied": "wott_hub.errors",
 }
 
 __all__ = [
     "ConfigError",
     "Conflict",
     "DeviceConfig",
+    "Driver",
     "DriverError",
     "HistoryError",
     "Hub",
     "HubConfig",
     "InvalidInput",
     "NotFound",
+    "RecordRefused",
     "SettingsError",
+    "WorkerDied",
     "WottHubError",
     "__version__",
     "serve",

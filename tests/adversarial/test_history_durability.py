@@ -35,7 +35,7 @@ _HUB = textwrap.dedent("""
         cfg = HubConfig(name="load", host="127.0.0.1", http_port=0, ws_port=0, database=sys.argv[1],
                         directory=DirectoryConfig(enabled=False))
         hub = Hub(cfg)
-        hub.plane.set_durability(sys.argv[2])
+        hub._plane.set_durability(sys.argv[2])
         await hub.start()
         await hub.expose_thing("load", TD, record=True)
         stop = asyncio.Event()
@@ -49,7 +49,7 @@ _HUB = textwrap.dedent("""
         while True:  # under load: bursts of 50 records, as fast as the loop allows
             for _ in range(50):
                 i += 1
-                hub.plane.publish("load", KIND_EVENT, "tick", time.time_ns(), json.dumps({"i": i}))
+                hub._plane.publish("load", KIND_EVENT, "tick", time.time_ns(), json.dumps({"i": i}))
             await asyncio.sleep(0.001)
 
     asyncio.run(main())

@@ -95,7 +95,7 @@ def hub_on(hub_thread, corrupted):
 
 
 def _writer(hub):
-    return hub.writer if getattr(hub, "writer", None) is not None else hub.history.writer
+    return hub._history.writer
 
 
 def test_an_sse_resume_needing_corrupted_history_is_refused_with_503(hub_on):

@@ -215,8 +215,8 @@ def test_a_healthy_device_streams_without_a_gap_through_it_all(hub, sse_events):
     got = sse_events(f"{hub.hub.td_url('pad')}/events", 60, timeout=10)
     ids = [int(e.id) for e in got]
     assert ids == sorted(set(ids))
-    assert hub.hub.writer.flush()
-    recs, _ = hub.hub.reader.rows("pad", 0, 1 << 62, (KIND_EVENT, None), limit=10**7)
+    assert hub.hub._history.writer.flush()
+    recs, _ = hub.hub._history.reader.rows("pad", 0, 1 << 62, (KIND_EVENT, None), limit=10**7)
     assert ids == [r.seq for r in recs if ids[0] <= r.seq <= ids[-1]], "gap in the healthy device's stream"
 
 

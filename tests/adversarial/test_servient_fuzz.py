@@ -199,7 +199,7 @@ requests = st.one_of(
 @given(name=st.one_of(st.sampled_from(["pad", "hub"]), things),
        messages=st.lists(requests, min_size=1, max_size=6))
 def test_websocket_messages_never_drop_the_connection(hub, name, messages) -> None:
-    url = f"ws://127.0.0.1:{hub.hub.server.ws_port}/{seg(name)}"
+    url = f"ws://127.0.0.1:{hub.hub._server.ws_port}/{seg(name)}"
 
     async def main() -> None:
         try:

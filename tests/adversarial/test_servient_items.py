@@ -36,7 +36,7 @@ def http(hub):
 
 
 def ws_url(hub, name: str) -> str:
-    return f"ws://127.0.0.1:{hub.hub.server.ws_port}/{name}"
+    return f"ws://127.0.0.1:{hub.hub._server.ws_port}/{name}"
 
 
 def assert_problem(resp: httpx.Response, status: int, *words: str) -> dict[str, Any]:

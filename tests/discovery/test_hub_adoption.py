@@ -81,16 +81,16 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
             tdd = rows[f"hub-under-test {hub.hub_id}"]  # instance names carry the hub id
             assert tdd["type"] == "Directory" and tdd["td_type"] == "Directory"
             assert tdd["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": "http"}
-            assert tdd["port"] == hub.server.http_port and tdd["addresses"] == ["127.0.0.1"]
-            assert tdd["id"] == hub.network.directory.directory.own_id
+            assert tdd["port"] == hub._server.http_port and tdd["addresses"] == ["127.0.0.1"]
+            assert tdd["id"] == hub._network.directory.directory.own_id
             thing = rows[f"hub on hub-under-test {hub.hub_id}"]
             assert thing["txt"] == {"td": "/wot/hub", "type": "Thing", "scheme": "http"}
-            assert thing["id"] == hub.identity.hub_thing_id
+            assert thing["id"] == hub._identity.hub_thing_id
 
             # the simulator's announcement: fetched, claimed by wot-remote, exposed as a device
             await wait_for(lambda: "skin-7" in hub.devices and hub.devices["skin-7"].driver.connects > 0,
                            what="the WoT device adopted and streaming")
-            assert hub.network.discovery.adopted == {FOREIGN: "skin-7"}
+            assert hub._network.discovery.adopted == {FOREIGN: "skin-7"}
             dev = hub.devices["skin-7"]
             assert dev.family == "wot-remote" and dev.health_state() == ("ok", "")
             assert sorted(hub.devices) == ["skin-7"]  # nothing of the hub's own was adopted
@@ -98,7 +98,7 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
             assert td["tac:family"] == "wot-remote" and td["title"] == "skin-7"
             assert validate_td(td) == []
             listed = (await http.get(f"{hub.http_url}/things")).json()
-            assert hub.identity.device_id("skin-7") in {t["id"] for t in listed}
+            assert hub._identity.device_id("skin-7") in {t["id"] for t in listed}
             mesh = (await http.get(f"{hub.td_url('skin-7')}/properties/skinNodes")).json()
             source_mesh = (await http.get(f"{sim_url}wot/pad-1/properties/skinNodes")).json()
             assert mesh == source_mesh

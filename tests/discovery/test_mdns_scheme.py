@@ -52,11 +52,11 @@ def test_announced_records_carry_the_scheme_the_hub_serves(tmp_path, run, tls):
             assert directory["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": scheme}
             thing = rows[f"hub on scheme-test {hub.hub_id}"]
             assert thing["txt"] == {"td": "/wot/hub", "type": "Thing", "scheme": scheme}
-            assert thing["port"] == directory["port"] == hub.server.http_port
+            assert thing["port"] == directory["port"] == hub._server.http_port
             # what the records point at answers with that scheme (and the TD's forms use it)
             async with httpx.AsyncClient(verify=verify, timeout=10) as http:
                 td = (await http.get(f"{scheme}://127.0.0.1:{thing['port']}{thing['txt']['td']}")).json()
-            assert td["id"] == hub.identity.hub_thing_id
+            assert td["id"] == hub._identity.hub_thing_id
             hrefs = [f["href"] for a in td["properties"].values() for f in a["forms"]]
             assert hrefs and all(h.startswith((f"{scheme}://", "ws")) for h in hrefs)
         finally:

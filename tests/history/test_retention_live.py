@@ -50,12 +50,12 @@ def test_old_and_excess_records_go_while_the_hub_writes_and_the_file_stops_growi
                     devices=(busy_scene("pad"), busy_scene("pad2")))
     ht = hub_thread(cfg).start()
     try:
-        writer = ht.hub.writer
+        writer = ht.hub._history.writer
         # the configured policy, checked every 0.3 s instead of every minute (the test's only change)
         assert writer.retention == Retention(days=1, max_mb=LIMIT_MB)
         writer.retention = Retention(days=1, max_mb=LIMIT_MB, check_every_s=0.3)
         writer._next_retention = 0.0
-        engine = ht.hub.history.engine
+        engine = ht.hub._history.engine
 
         def oldest(thing: str) -> int:
             with engine.connect() as conn:

@@ -47,8 +47,8 @@ def _health(live, device):
 
 
 def _recorded(live, device, name):
-    assert live.hub.writer.flush()
-    recs, _ = live.hub.reader.rows(device, 0, 1 << 62, (KIND_EVENT, name), limit=10**7)
+    assert live.hub._history.writer.flush()
+    recs, _ = live.hub._history.reader.rows(device, 0, 1 << 62, (KIND_EVENT, name), limit=10**7)
     return recs
 
 
@@ -103,8 +103,8 @@ def test_restart_reopens_the_driver_and_keeps_the_stream_and_its_sequence(live, 
     assert len(got) > restarted_at + 10, "no events after the restart on the same connection"
     ids = [i for i, _, _ in got]
     assert ids == sorted(ids) and len(set(ids)) == len(ids)
-    assert live.hub.writer.flush()
-    recs, _ = live.hub.reader.rows("pad", 0, 1 << 62, (KIND_EVENT, None), limit=10**7)
+    assert live.hub._history.writer.flush()
+    recs, _ = live.hub._history.reader.rows("pad", 0, 1 << 62, (KIND_EVENT, None), limit=10**7)
     recorded = sorted(r.seq for r in recs)
     assert ids == [s for s in recorded if ids[0] <= s <= ids[-1]], "gap in the stream across the restart"
     actions = [json.loads(d) for _, name, d in got if name == "deviceAction"]

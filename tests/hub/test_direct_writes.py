@@ -36,7 +36,7 @@ def hub(hub_thread, press_scene):
 def _flood(ht) -> tuple[list[int], bool]:
     """Publish on the hub's loop, in rounds, until a subscriber of EVENT has records queued behind
     its backed-up socket (or ROUNDS are spent): the seqs published, and whether one was queued."""
-    plane = ht.hub.plane
+    plane = ht.hub._plane
 
     async def run() -> tuple[list[int], bool]:
         seqs: list[int] = []
@@ -53,11 +53,11 @@ def _flood(ht) -> tuple[list[int], bool]:
 
 
 def _subscribers(ht) -> int:
-    return ht.call(lambda: len(ht.hub.plane.stream("pad").subs.get((KIND_EVENT, EVENT), ())))
+    return ht.call(lambda: len(ht.hub._plane.stream("pad").subs.get((KIND_EVENT, EVENT), ())))
 
 
 def test_an_sse_client_that_stops_reading_backs_up_then_gets_every_record_once_in_order(hub):
-    sock = socket.create_connection(("127.0.0.1", hub.hub.server.http_port), timeout=10)
+    sock = socket.create_connection(("127.0.0.1", hub.hub._server.http_port), timeout=10)
     try:
         sock.sendall(f"GET /wot/pad/events/{EVENT} HTTP/1.1\r\nHost: x\r\nAccept: text/event-stream\r\n\r\n"
                      .encode())
@@ -87,7 +87,7 @@ def test_an_sse_client_that_stops_reading_backs_up_then_gets_every_record_once_i
 
 def test_a_websocket_client_that_stops_reading_backs_up_then_gets_every_record_once_in_order(hub):
     async def main() -> None:
-        ws = await websocket_connect(f"ws://127.0.0.1:{hub.hub.server.ws_port}/pad", connect_timeout=5)
+        ws = await websocket_connect(f"ws://127.0.0.1:{hub.hub._server.ws_port}/pad", connect_timeout=5)
         try:
             await ws.write_message(json.dumps({"jsonrpc": "2.0", "method": "on_event",
                                                "params": {"name": EVENT}, "id": 1}))
@@ -133,7 +133,7 @@ def _dechunk(body: bytes) -> tuple[bytes, bytes]:
 
 @pytest.mark.parametrize("version", ["HTTP/1.1", "HTTP/1.0"])
 def test_sse_records_reach_the_socket_framed_as_the_http_version_says(hub, version):
-    sock = socket.create_connection(("127.0.0.1", hub.hub.server.http_port), timeout=10)
+    sock = socket.create_connection(("127.0.0.1", hub.hub._server.http_port), timeout=10)
     try:
         sock.sendall(f"GET /wot/pad/events/{EVENT} {version}\r\nHost: x\r\nAccept: text/event-stream\r\n\r\n"
                      .encode())
@@ -152,7 +152,7 @@ def test_sse_records_reach_the_socket_framed_as_the_http_version_says(hub, versi
             out = []
             for i in range(5):  # the first ones written inside publish, the others queued
                 data = json.dumps({"i": i})
-                out.append((hub.hub.plane.publish("pad", KIND_EVENT, EVENT, time.time_ns(), data).seq, data))
+                out.append((hub.hub._plane.publish("pad", KIND_EVENT, EVENT, time.time_ns(), data).seq, data))
             return out
 
         sent = hub.call(publish)

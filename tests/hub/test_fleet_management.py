@@ -146,7 +146,7 @@ def test_add_restart_remove_never_interrupt_another_devices_stream(live, scene):
     assert httpx.get(out["td"], timeout=10).json()["title"] == "c"
     td_id = live.hub.devices["c"].thing.td["id"]
     _wait(lambda: td_id in _directory_ids(live), "the added device in the directory")
-    _wait(lambda: "c" in live.hub.network.discovery._names, "the added device announced on mDNS")
+    _wait(lambda: "c" in live.hub._network.discovery._names, "the added device announced on mDNS")
     r = _act(live, "restartDevice", {"id": "b"})
     assert r.status_code == 200 and r.json()["outcome"] == "ok", r.text
     time.sleep(0.3)
@@ -154,13 +154,13 @@ def test_add_restart_remove_never_interrupt_another_devices_stream(live, scene):
     assert r.status_code == 200 and r.json() == {"id": "c", "removed": True}
     assert httpx.get(live.hub.td_url("c"), timeout=10).status_code == 404
     _wait(lambda: td_id not in _directory_ids(live), "the removed device gone from the directory")
-    assert "c" not in live.hub.network.discovery._names
+    assert "c" not in live.hub._network.discovery._names
     n = len(stream.ids)
     time.sleep(0.5)
     ids = stream.stop()
     assert len(ids) > n, "the stream stopped"
-    assert live.hub.writer.flush()
-    recs, _ = live.hub.reader.rows("a", 0, 1 << 62, (KIND_EVENT, None), limit=10**7)
+    assert live.hub._history.writer.flush()
+    recs, _ = live.hub._history.reader.rows("a", 0, 1 << 62, (KIND_EVENT, None), limit=10**7)
     recorded = sorted(r.seq for r in recs)
     assert ids == [s for s in recorded if ids[0] <= s <= ids[-1]], "gap in a's stream"
     assert _health(live)["b"]["restarts"] == 1
@@ -195,7 +195,7 @@ def test_a_device_that_fails_to_open_is_retried_with_backoff_then_served(live, f
     assert _health(live)["late"]["state"] in ("ok", "running", "starting")
     td_id = live.hub.devices["late"].thing.td["id"]
     _wait(lambda: td_id in _directory_ids(live), "the late device in the directory")
-    _wait(lambda: "late" in live.hub.network.discovery._names, "the late device announced on mDNS")
+    _wait(lambda: "late" in live.hub._network.discovery._names, "the late device announced on mDNS")
     typo = _health(live)["typo"]  # settings its family refuses: never opens, not retried
     assert typo["state"] == "failed" and "fial" in typo["reason"] and "not retried" in typo["reason"]
     assert flaky.attempts.get("typo") is None

@@ -23,7 +23,7 @@ def live(tmp_path_factory, hub_thread, scene):
     ht = hub_thread(cfg).start()
 
     async def recorded() -> None:
-        while ht.hub.writer.committed.get("pad2", 0) < 150:
+        while ht.hub._history.writer.committed.get("pad2", 0) < 150:
             await asyncio.sleep(0.05)
 
     ht.call(recorded)
@@ -69,7 +69,7 @@ def test_devices_and_a_page_of_records_match_the_database(live, hub_td):
                                                               "names": ["skinDeformedDetection"]}, timeout=10)
     assert resp.status_code == 200 and resp.headers["content-type"].startswith("application/x-ndjson")
     lines = [json.loads(x) for x in resp.text.splitlines()]
-    pages = live.hub.reader.pages("pad", lo, None, ["skinDeformedDetection"])
+    pages = live.hub._history.reader.pages("pad", lo, None, ["skinDeformedDetection"])
     want = [(r.seq, r.t_ns, r.kind, r.name, r.data) for page in pages for r in page][:80]
     assert [(x["seq"], x["t_ns"], x["kind"], x["name"], json.dumps(x["data"], separators=(",", ":")))
             for x in lines] == [(s, t, KIND_NAMES[k], n, json.dumps(json.loads(d), separators=(",", ":")))

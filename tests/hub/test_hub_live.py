@@ -127,7 +127,7 @@ def sse(sse_events):
 
 
 def _recorded(live, device, kind, name=None):
-    writer, reader = live.hub.writer, live.hub.reader
+    writer, reader = live.hub._history.writer, live.hub._history.reader
     assert writer.flush()
     recs, _ = reader.rows(device, 0, 1 << 62, (kind, name), limit=10**7)
     return {r.seq: r for r in recs}
@@ -248,8 +248,8 @@ def test_websocket_json_rpc_errors_follow_wotpy(live):
 
 def test_history_records_each_device_td_and_static_values_as_served(live):
     for device in DEVICES:
-        served = live.hub.server.things.get(device)
-        info = live.hub.reader.thing_info(device)
+        served = live.hub._server.things.get(device)
+        info = live.hub._history.reader.thing_info(device)
         assert info["td"] == served.td
         assert info["static_values"] == {k: json.loads(v) for k, v in served.static.items()}
         assert "skinNodes" in info["static_values"]
@@ -261,7 +261,7 @@ def test_a_replay_that_cannot_be_served_leaves_nothing_behind(live):
     async def replay_as_pad_in_capitals():  # "Pad" and "pad" share a WebSocket URL
         with pytest.raises(ValueError, match="Pad"):  # bad input: the replay action answers 400
             await hub.add_replay("pad", thing_id="Pad")
-        return "Pad" in hub.plane.streams, "Pad" in hub.replays, "Pad" in hub.server.things.by_id
+        return "Pad" in hub._plane.streams, "Pad" in hub.replays, "Pad" in hub._server.things.by_id
 
     assert live.call(replay_as_pad_in_capitals) == (False, False, False)
     assert httpx.get(hub.td_url("pad")).status_code == 200

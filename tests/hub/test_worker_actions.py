@@ -44,8 +44,8 @@ def _health(live, device):
 
 
 def _recorded(live, device, name=None):
-    assert live.call(lambda: live.hub.writer.flush())
-    recs, _ = live.hub.reader.rows(device, 0, 1 << 62, (KIND_EVENT, name), limit=10**7)
+    assert live.call(lambda: live.hub._history.writer.flush())
+    recs, _ = live.hub._history.reader.rows(device, 0, 1 << 62, (KIND_EVENT, name), limit=10**7)
     return recs
 
 
@@ -127,7 +127,7 @@ def test_a_worker_that_exited_fails_the_action_with_422_and_records_it(tmp_path,
                     devices=(scene("pad", "flat", rate_hz=30.0),))
     ht = hub_thread(cfg).start()
     try:
-        (proc,) = ht.hub.pool.procs
+        (proc,) = ht.hub._fleet.pool.procs
         proc.kill()
         run(wait_for(lambda: _health(ht, "pad")["state"] == "failed", what="the device failed"))
         r = httpx.post(f"{ht.hub.td_url('pad')}/actions/tare", json={}, timeout=20)

@@ -30,13 +30,13 @@ def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path,
         assert validate_td(td) == [] and td["properties"]["skinNodes"]
         assert httpx.get(f"{hub.td_url('pad')}/properties/skinNodes").json()["numOfNodes"] == 256
         got = [(int(ev.id), ev.data) for ev in sse_events(f"{hub.td_url('pad')}/events", 30, timeout=20)]
-        assert ht.call(lambda: hub.writer.flush())
-        recs, _ = hub.reader.rows("pad", 0, 1 << 62, (KIND_EVENT, None), limit=10**6)
+        assert ht.call(lambda: hub._history.writer.flush())
+        recs, _ = hub._history.reader.rows("pad", 0, 1 << 62, (KIND_EVENT, None), limit=10**6)
         recorded = {r.seq: r.data for r in recs}
         assert all(recorded[i] == d for i, d in got)
         ids = [i for i, _ in got]
         assert ids == [s for s in sorted(recorded) if ids[0] <= s <= ids[-1]]
-        skins = ht.call(lambda: [r for r in hub.plane.stream("pad").ring
+        skins = ht.call(lambda: [r for r in hub._plane.stream("pad").ring
                                  if r.name == "skinDeformedDetection"])
         assert skins and all(isinstance(r.skin, SkinArrays) for r in skins)  # its arrays crossed the pipe
         for r in skins[-5:]:
@@ -47,10 +47,10 @@ def test_devices_in_a_worker_process_stream_and_record_like_local_ones(tmp_path,
         assert health["devices"]["pad"]["frames"] > 0
         # below the hub's CPU priority by [hub] worker_nice (default 10): its loop runs first
         own = os.getpriority(os.PRIO_PROCESS, 0)
-        assert [os.getpriority(os.PRIO_PROCESS, p.pid) for p in hub.pool.procs] == [min(own + 10, 19)]
+        assert [os.getpriority(os.PRIO_PROCESS, p.pid) for p in hub._fleet.pool.procs] == [min(own + 10, 19)]
     finally:
         ht.stop()
-    assert not any(p.is_alive() for p in hub.pool.procs)  # the workers are gone
+    assert not any(p.is_alive() for p in hub._fleet.pool.procs)  # the workers are gone
 
 
 # --- the pipe: records batched in the worker (Outbox), unpacked by the hub (WorkerPool) ----------------

@@ -21,7 +21,7 @@ LAMP = {"@context": "https://www.w3.org/2022/wot/td/v1.1", "id": "urn:example:la
 
 
 async def listing(hub: Hub) -> dict[str, dict[str, Any]]:
-    await hub.network.drain()
+    await hub._network.drain()
     async with httpx.AsyncClient(timeout=10) as http:
         resp = await http.get(f"{hub.http_url}/things")
     assert resp.status_code == 200 and resp.headers["Content-Type"] == "application/ld+json"
@@ -38,11 +38,11 @@ def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_p
         client = DirectoryClient(f"{hub.http_url}/")
         try:
             tds = await listing(hub)
-            own = hub.network.directory.directory.own_id
-            served = {t.td["id"]: t.td for t in hub.server.things}
+            own = hub._network.directory.directory.own_id
+            served = {t.td["id"]: t.td for t in hub._server.things}
             assert set(tds) == {*served, own}
-            assert set(served) == {hub.identity.device_id("pad"), hub.identity.device_id("cyl"),
-                                   hub.identity.hub_thing_id}
+            assert set(served) == {hub._identity.device_id("pad"), hub._identity.device_id("cyl"),
+                                   hub._identity.hub_thing_id}
             for tid, td in served.items():
                 listed = tds[tid]
                 assert {k: v for k, v in listed.items() if k not in ("@context", "registration")} == \
@@ -52,22 +52,22 @@ def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_p
             wk = (await client.directory_description())
             assert wk["base"] == f"{hub.http_url}/" and wk["id"] == own and wk["title"] == "lab directory"
             found = await client.search('$[?@["tac:family"]=="scene"].id')
-            assert sorted(found) == [hub.identity.device_id("cyl"), hub.identity.device_id("pad")]
+            assert sorted(found) == [hub._identity.device_id("cyl"), hub._identity.device_id("pad")]
 
             async with client.events() as stream:
                 await hub.remove_device("pad")  # removed from the hub: gone from the directory
                 ev = await stream.next(10)
-                assert (ev.type, ev.data) == ("thing_deleted", {"id": hub.identity.device_id("pad")})
-                assert hub.identity.device_id("pad") not in await listing(hub)
+                assert (ev.type, ev.data) == ("thing_deleted", {"id": hub._identity.device_id("pad")})
+                assert hub._identity.device_id("pad") not in await listing(hub)
                 await hub.add_device(press_scene("pad2"))
                 ev = await stream.next(10)
-                assert (ev.type, ev.data) == ("thing_created", {"id": hub.identity.device_id("pad2")})
-                out = await hub.replay.replay("cyl", speed=0)  # replay Things too
+                assert (ev.type, ev.data) == ("thing_created", {"id": hub._identity.device_id("pad2")})
+                out = await hub._replay.replay("cyl", speed=0)  # replay Things too
                 ev = await stream.next(10)
-                assert (ev.type, ev.data) == ("thing_created", {"id": hub.identity.replay_id("cyl")})
-                await hub.replay.stop(out["thing"])
+                assert (ev.type, ev.data) == ("thing_created", {"id": hub._identity.replay_id("cyl")})
+                await hub._replay.stop(out["thing"])
                 ev = await stream.next(10)
-                assert (ev.type, ev.data) == ("thing_deleted", {"id": hub.identity.replay_id("cyl")})
+                assert (ev.type, ev.data) == ("thing_deleted", {"id": hub._identity.replay_id("cyl")})
 
             # no token configured and the hub on loopback: loopback clients register freely
             await client.put(LAMP)
@@ -84,8 +84,8 @@ def test_the_hub_lists_every_thing_it_serves_and_follows_adds_and_removals(tmp_p
         await hub.start()
         try:
             tds = await listing(hub)
-            assert set(tds) - {hub.network.directory.directory.own_id} == {
-                hub.identity.device_id("cyl"), hub.identity.hub_thing_id, "urn:example:lamp"}
+            assert set(tds) - {hub._network.directory.directory.own_id} == {
+                hub._identity.device_id("cyl"), hub._identity.hub_thing_id, "urn:example:lamp"}
         finally:
             await hub.stop()
 
@@ -102,7 +102,7 @@ def test_writes_need_the_token_when_one_is_set_and_a_hub_without_history_keeps_i
         anonymous = DirectoryClient(f"{hub.http_url}/")
         trusted = DirectoryClient(f"{hub.http_url}/", token="s3cret")
         try:
-            assert hub.engine is None and hub.identity.device_id("pad") in await listing(hub)
+            assert hub._history.engine is None and hub._identity.device_id("pad") in await listing(hub)
             with pytest.raises(ProblemError) as refused:  # a write without the token is not accepted
                 await anonymous.put(LAMP)
             assert refused.value.status == 401
@@ -124,7 +124,7 @@ def test_a_directory_request_during_start_up_waits_for_the_directory(tmp_path, p
         hub = Hub(HubConfig(http_port=0, ws_port=0, database=str(tmp_path / "h.db"),
                             devices=(press_scene("pad"),)))
         opened = asyncio.Event()
-        real = hub.history.open
+        real = hub._history.open
 
         def slow_open() -> None:
             import time
@@ -133,7 +133,7 @@ def test_a_directory_request_during_start_up_waits_for_the_directory(tmp_path, p
             time.sleep(0.5)
             real()
 
-        hub.history.open = slow_open
+        hub._history.open = slow_open
         start = asyncio.ensure_future(hub.start())
         await opened.wait()
         async with httpx.AsyncClient(timeout=10) as http:
@@ -143,7 +143,7 @@ def test_a_directory_request_during_start_up_waits_for_the_directory(tmp_path, p
         try:
             assert put.status_code == 201
             assert resp.status_code == 200
-            assert hub.identity.device_id("pad") in {td["id"] for td in resp.json()}
+            assert hub._identity.device_id("pad") in {td["id"] for td in resp.json()}
         finally:
             await start
             with contextlib.suppress(Exception):

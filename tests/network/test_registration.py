@@ -38,18 +38,18 @@ def test_registered_with_a_ttl_followed_and_deleted_on_a_clean_stop(tmp_path, pr
                         devices=(press_scene("pad"), press_scene("cyl", "cylinder")),
                         directory=DirectoryConfig(register_to=(Registration(server.url, TOKEN),), ttl_s=30))
         hub = Hub(cfg)
-        ids = hub.identity  # every Thing id carries the hub's id (docs/scale-out.md)
+        ids = hub._identity  # every Thing id carries the hub's id (docs/scale-out.md)
         await hub.start()
         try:
-            await hub.network.drain()
+            await hub._network.drain()
             tds = await hub_ids(fleet)
             assert set(tds) == {ids.device_id("pad"), ids.device_id("cyl"),
                                 ids.hub_thing_id}
             reg = tds[ids.device_id("pad")]["registration"]
             assert reg["ttl"] == 30 and "expires" in reg
-            assert tds[ids.device_id("pad")]["forms"] == hub.server.things.get("pad").td["forms"]
+            assert tds[ids.device_id("pad")]["forms"] == hub._server.things.get("pad").td["forms"]
             await hub.remove_device("cyl")
-            await hub.network.drain()
+            await hub._network.drain()
             assert set(await hub_ids(fleet)) == {ids.device_id("pad"), ids.hub_thing_id}
         finally:
             await hub.stop()

@@ -31,8 +31,8 @@ def test_the_hub_id_is_made_once_kept_beside_the_database_and_unique_per_hub(tmp
     async def scenario() -> None:
         async with Hub(a) as hub:
             assert hub.hub_id == first.id and hub.describe()["hub_id"] == first.id
-            assert hub.server.things.get("pad").td["id"] == f"urn:wott-hub:{first.id}:device:pad"
-            assert hub.server.things.get("hub").td["id"] == f"urn:wott-hub:{first.id}:hub"
+            assert hub._server.things.get("pad").td["id"] == f"urn:wott-hub:{first.id}:device:pad"
+            assert hub._server.things.get("hub").td["id"] == f"urn:wott-hub:{first.id}:hub"
             assert hub.td_url("pad").endswith("/wot/pad")  # URL paths keep the short names
 
     run(scenario())
@@ -118,4 +118,4 @@ def test_a_hub_refuses_the_id_of_another_live_hub_and_takes_over_a_dead_ones(tmp
 
 
 async def _hub_td(hub: Hub) -> dict:
-    return dict(hub.server.things.get("hub").td)
+    return dict(hub._server.things.get("hub").td)

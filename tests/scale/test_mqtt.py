@@ -37,7 +37,7 @@ def test_events_and_property_changes_on_the_topics_of_the_td_forms(tmp_path, pre
                                                                     mqtt_reader, run, wait_for):
     async def scenario() -> None:
         async with Hub(hub_config(tmp_path, press_scene, broker.url)) as hub:
-            td = hub.server.things.get("pad").td
+            td = hub._server.things.get("pad").td
             assert {"mqv": "https://www.w3.org/2019/wot/mqtt#"} in td["@context"]
             assert validate_td(td) == []  # TD 1.1 and Tactile, MQTT forms included
             ev, prop = mqtt_form(td["events"][EVENT]), mqtt_form(td["properties"][CONTACTS])
@@ -49,7 +49,7 @@ def test_events_and_property_changes_on_the_topics_of_the_td_forms(tmp_path, pre
             assert prop["mqv:filter"] == f"{prefix}/properties/{CONTACTS}"
             assert prop["op"] == ["observeproperty", "unobserveproperty"]
             assert prop["mqv:retain"] is True and prop["mqv:qos"] == "0"  # per frame: event_qos
-            health = mqtt_form(hub.server.things.get(HUB_THING_ID).td["properties"]["health"])
+            health = mqtt_form(hub._server.things.get(HUB_THING_ID).td["properties"]["health"])
             assert health["mqv:retain"] is True and health["mqv:qos"] == "1"
             action = mqtt_form(td["events"]["actionDetection"])
             assert action["mqv:qos"] == "1" and action["mqv:filter"] == f"{prefix}/events/actionDetection"
@@ -61,7 +61,7 @@ def test_events_and_property_changes_on_the_topics_of_the_td_forms(tmp_path, pre
                                and reader.on(prop["mqv:filter"]),
                                timeout=20, what=lambda: f"MQTT messages {sorted(reader.topics())}")
             # the same texts the hub serves over SSE and records (the ring holds the recent ones)
-            served = {r.data for r in hub.plane.stream("pad").ring if r.name == EVENT}
+            served = {r.data for r in hub._plane.stream("pad").ring if r.name == EVENT}
             got = [p.decode() for t, p, _ in reader.messages if t == ev["mqv:filter"]]
             assert served & set(got)
             for g in got[:20]:  # each one valid against the event's data schema in the TD
@@ -77,13 +77,13 @@ def test_retained_tds_and_values_for_late_subscribers_and_cleared_on_a_clean_sto
     async def scenario() -> None:
         async with Hub(hub_config(tmp_path, press_scene, broker.url)) as hub:
             prefix = f"wott/{hub.hub_id}"
-            await wait_for(lambda: hub.mqtt.published > 5 and not hub.mqtt.queue, timeout=20,
+            await wait_for(lambda: hub._mqtt.published > 5 and not hub._mqtt.queue, timeout=20,
                            what="published")
             async with mqtt_reader(broker.url, f"{prefix}/+/td", f"{prefix}/+/properties/+") as late:
                 await wait_for(lambda: {f"{prefix}/pad/td", f"{prefix}/hub/td"} <= late.topics(), timeout=10,
                                what=lambda: f"retained TDs {sorted(late.topics())}")
             tds = {t: json.loads(p) for t, p, retained in late.messages if t.endswith("/td") and retained}
-            assert tds[f"{prefix}/pad/td"]["id"] == hub.server.things.get("pad").td["id"]
+            assert tds[f"{prefix}/pad/td"]["id"] == hub._server.things.get("pad").td["id"]
             assert tds[f"{prefix}/hub/td"]["id"] == f"urn:wott-hub:{hub.hub_id}:hub"
             assert any(t == f"{prefix}/pad/properties/{CONTACTS}" and r for t, _, r in late.messages)
         async with mqtt_reader(broker.url, f"{prefix}/#") as after:  # clean stop: nothing retained left
@@ -97,9 +97,9 @@ def test_a_broker_restart_is_survived(tmp_path, press_scene, broker, mqtt_reader
     async def scenario() -> None:
         async with Hub(hub_config(tmp_path, press_scene, broker.url, reconnect_max_s=0.5)) as hub:
             topic = f"wott/{hub.hub_id}/pad/events/{EVENT}"
-            await wait_for(lambda: hub.mqtt.connected, timeout=10, what="connected")
+            await wait_for(lambda: hub._mqtt.connected, timeout=10, what="connected")
             await asyncio.to_thread(broker.restart)  # no persistence: retained TDs are gone with it
-            await wait_for(lambda: hub.mqtt.connects >= 2 and hub.mqtt.connected, timeout=15,
+            await wait_for(lambda: hub._mqtt.connects >= 2 and hub._mqtt.connected, timeout=15,
                            what=lambda: f"reconnected: {hub.health()['mqtt']}")
             async with mqtt_reader(broker.url, topic, f"wott/{hub.hub_id}/pad/td") as reader:
                 await wait_for(lambda: len(reader.on(topic)) >= 10 and reader.on(f"wott/{hub.hub_id}/pad/td"),
@@ -119,7 +119,7 @@ def test_an_absent_broker_never_holds_the_hub_up(tmp_path, press_scene, broker_c
             url = f"{hub.http_url}/wot/pad/events/{EVENT}"
             events = await asyncio.to_thread(sse_events, url, 5)  # SSE streams as ever
             assert len(events) == 5
-            await wait_for(lambda: hub.mqtt.dropped > 0, timeout=15, what="drops counted")
+            await wait_for(lambda: hub._mqtt.dropped > 0, timeout=15, what="drops counted")
             health = hub.health()
             assert health["state"] == "degraded" and health["mqtt"]["state"] == "disconnected"
             assert health["mqtt"]["queued"] <= 50 and health["mqtt"]["error"]
@@ -146,7 +146,7 @@ def test_bursts_of_every_size_and_qos_arrive_whole_and_in_order_per_topic(tmp_pa
 
     async def scenario() -> None:
         async with Hub(cfg) as hub, mqtt_reader(broker.url, "burst/#") as reader:
-            await wait_for(lambda: hub.mqtt.connected, timeout=10, what="connected")
+            await wait_for(lambda: hub._mqtt.connected, timeout=10, what="connected")
             sent: dict[str, list[bytes]] = {}
             for burst in range(4):  # each burst put at once: one batch of the publisher
                 for i in range(400):
@@ -154,7 +154,7 @@ def test_bursts_of_every_size_and_qos_arrive_whole_and_in_order_per_topic(tmp_pa
                     topic, qos = (f"burst/p{i % 2}", 1) if i % 5 == 0 else (f"burst/e{i % 3}", 0)
                     payload = f"{burst}:{i}:".encode().ljust(size, b"x")
                     sent.setdefault(topic, []).append(payload)
-                    hub.mqtt.put((topic, payload, qos, False))
+                    hub._mqtt.put((topic, payload, qos, False))
                 total = sum(map(len, sent.values()))
                 await wait_for(lambda n=total: len(reader.messages) >= n, timeout=30,
                                what=lambda n=total: f"{len(reader.messages)} of {n} messages")
@@ -162,7 +162,7 @@ def test_bursts_of_every_size_and_qos_arrive_whole_and_in_order_per_topic(tmp_pa
             for topic, payload, _ in reader.messages:
                 got.setdefault(topic, []).append(payload)
             assert got == sent
-            assert hub.mqtt.dropped == 0
+            assert hub._mqtt.dropped == 0
 
     run(scenario(), timeout=120)
 
@@ -178,7 +178,7 @@ def test_a_message_put_while_nothing_waits_is_written_at_once_or_batched_and_all
 
     async def scenario() -> None:
         async with Hub(cfg) as hub, mqtt_reader(broker.url, "now/#") as reader:
-            mq = hub.mqtt
+            mq = hub._mqtt
             await wait_for(lambda: mq.connected and mq.idle, timeout=10,
                            what="the publisher idle")
             sent = [(f"now/{'ab'[i % 2]}", f"{i}:".encode().ljust(16_000_000 if i == 3 else 100, b"x"))
@@ -209,7 +209,7 @@ def test_a_message_that_fails_to_be_written_at_once_stays_in_the_publisher(tmp_p
 
     async def scenario() -> None:
         async with Hub(cfg) as hub, mqtt_reader(broker.url, "now/#") as reader:
-            mq = hub.mqtt
+            mq = hub._mqtt
             await wait_for(lambda: mq.connected and mq.idle, timeout=10, what="the publisher idle")
             mq.put(("now/bad", 12345, 0, False))  # type: ignore[arg-type]  # not raised here
             await wait_for(lambda: mq.connected and mq.idle, timeout=10, what="the publisher idle again")
@@ -228,8 +228,8 @@ from wott_hub.hub import Hub
 cfg = HubConfig.from_dict({"hub": {"id": "cell-1", "http_port": 0, "ws_port": False, "history": False}})
 async def main():
     async with Hub(cfg) as hub:
-        td = json.dumps(hub.server.things.get("hub").td)
-        print(json.dumps({"mqtt": hub.mqtt is None, "forms": "mqtt://" in td or "mqv" in td,
+        td = json.dumps(hub._server.things.get("hub").td)
+        print(json.dumps({"mqtt": hub._mqtt is None, "forms": "mqtt://" in td or "mqv" in td,
                           "loaded": sorted(m for m in sys.modules if m.startswith(("aiomqtt", "paho")))}))
 asyncio.run(main())
 """

@@ -115,7 +115,7 @@ def test_the_embedded_directory_of_an_open_hub_declares_nosec_only(tmp_path, hub
         td = json.loads(td["body"])
         assert td["securityDefinitions"] == {"nosec_sc": {"scheme": "nosec"}}
         assert td["security"] == ["nosec_sc"]
-        _check(td, _local, ht.hub.identity.hub_thing_id, lambda r: None)
+        _check(td, _local, ht.hub._identity.hub_thing_id, lambda r: None)
     finally:
         ht.stop()
 

@@ -19,7 +19,7 @@ READY = "window.twin && window.twin.page === 'device' && window.twin.ready"
 
 def device_url(twin, thing_id: str) -> str:
     """The device page for a Thing, given by its TD's URL in the directory (as the fleet page links it)."""
-    td_url = f"{twin.url}/things/{quote(twin.hub.identity.device_id(thing_id), safe='')}"
+    td_url = f"{twin.url}/things/{quote(twin.hub._identity.device_id(thing_id), safe='')}"
     return f"{twin.url}/twin/device.html?td={quote(td_url, safe='')}"
 
 
@@ -95,7 +95,7 @@ def test_dropped_sse_connection_resumes_without_loss(twin, barrel, wait):
 
     def drop() -> int:
         n = 0
-        for h in list(twin.hub.server.ctx.sse):
+        for h in list(twin.hub._server.ctx.sse):
             if h.request.path == "/wot/barrel/events":
                 h.request.connection.stream.close()  # the TCP connection, as a network drop would
                 n += 1
@@ -108,7 +108,7 @@ def test_dropped_sse_connection_resumes_without_loss(twin, barrel, wait):
     assert len(seqs) == len(set(seqs)) and seqs == sorted(seqs)  # nothing twice, in order
 
     def served() -> list[int]:
-        ring = twin.hub.plane.stream("barrel").ring
+        ring = twin.hub._plane.stream("barrel").ring
         return [r.seq for r in ring if r.kind == KIND_EVENT and seqs[0] <= r.seq <= seqs[-1]]
 
     assert seqs == twin.call(served)  # nothing lost across the drop
@@ -121,7 +121,7 @@ def test_replay_control_plays_pauses_resumes_and_goes_live(twin, barrel, wait):
     page.select_option("#range", "-10s")
     page.click("#play")
     wait(page, "window.twin.replay.state === 'playing' && window.twin.mode === 'replay'"
-                           f" && window.twin.thing === '{twin.hub.identity.replay_id('barrel')}'"
+                           f" && window.twin.thing === '{twin.hub._identity.replay_id('barrel')}'"
                            " && window.twin.frames > 2",
                            timeout=15_000)
     assert httpx.get(f"{twin.url}/wot/replay-barrel").status_code == 200
@@ -133,7 +133,7 @@ def test_replay_control_plays_pauses_resumes_and_goes_live(twin, barrel, wait):
     wait(page, f"window.twin.replay.state === 'playing' && window.twin.last"
                            f" && window.twin.last.stamp > {paused_at}", timeout=15_000)
     page.click("#live")
-    live_id = twin.hub.identity.device_id("barrel")
+    live_id = twin.hub._identity.device_id("barrel")
     wait(page, f"window.twin.mode === 'live' && window.twin.thing === '{live_id}'"
                            " && window.twin.packets > 0", timeout=15_000)
     assert httpx.get(f"{twin.url}/wot/replay-barrel").status_code == 404

@@ -34,7 +34,7 @@ def test_fleet_page_lists_every_demo_device_from_the_directory(fleet, page, scre
     screenshot(page, "twin-fleet", clip={"x": 0, "y": 0, "width": 1280, "height": bottom})
     # a row links to the device page of that Thing, by the URL of its TD in the directory
     href = page.locator("#fleet tbody tr[data-key='barrel'] a").get_attribute("href")
-    td_url = f"{fleet.url}/things/{quote(fleet.hub.identity.device_id('barrel'), safe='')}"
+    td_url = f"{fleet.url}/things/{quote(fleet.hub._identity.device_id('barrel'), safe='')}"
     assert href == f"/twin/device.html?td={quote(td_url, safe='')}"
     assert page.errors == []
 

@@ -65,7 +65,7 @@ def test_replay_action_replays_history_as_a_thing_and_stop_removes_it(twin, http
     stop = td["actions"]["stopReplay"]["forms"][0]["href"]
     # what is replayed must be in history first: deformed packets of a press (the hub may have just started)
     sse_events(f"{twin.hub.td_url('barrel')}/events/skinDeformedDetection", 5, timeout=20)
-    assert twin.hub.writer.flush()
+    assert twin.hub._history.writer.flush()
     deadline = time.monotonic() + 10
     while True:  # the busy barrel has recorded events within a second or two
         r = httpx.post(replay, json={"device": "barrel", "from": "-30s", "speed": 0}, timeout=20)

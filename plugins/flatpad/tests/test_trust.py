@@ -211,7 +211,7 @@ def test_painted_out_markers_are_listed_in_the_unavailable_nodes_property(tmp_pa
     driver.open_source = lambda: PaintedOut(PadSimulator(lay, scene), 20.0, removed=removed)
     cfg = HubConfig(http_port=0, ws_port=0, database=str(tmp_path / "hub.db"), devices=())
     with _Hub(cfg) as h:
-        h.call(h.hub.fleet.add_driver(driver, family="flatpad"))
+        h.call(h.hub._fleet.add_driver(driver, family="flatpad"))
         td = httpx.get(h.hub.td_url("pad-holes"), timeout=10).json()
         assert validate_td(td) == []
         aff = td["properties"]["unavailableNodes"]
@@ -226,13 +226,13 @@ def test_painted_out_markers_are_listed_in_the_unavailable_nodes_property(tmp_pa
             time.sleep(0.2)
         assert value == {"numOfUnavailableNodes": n, "arrayOfUnavailableNodes": removed}
         # published as a property change, once (the list does not change frame to frame)
-        while h.hub.fleet.running["pad-holes"].pipeline.state != "ended" and time.monotonic() < deadline:
+        while h.hub._fleet.running["pad-holes"].pipeline.state != "ended" and time.monotonic() < deadline:
             time.sleep(0.2)
-        assert h.hub.writer.flush()
-        recs, _ = h.hub.reader.rows("pad-holes", 0, 1 << 62, (KIND_PROPERTY, "unavailableNodes"), limit=100)
+        assert h.hub._history.writer.flush()
+        reader = h.hub._history.reader
+        recs, _ = reader.rows("pad-holes", 0, 1 << 62, (KIND_PROPERTY, "unavailableNodes"), limit=100)
         assert len(recs) == 1 and json.loads(recs[0].data) == value
         # and never reported deformed: the press was, the skin packets name none of the unknown nodes
-        packets, _ = h.hub.reader.rows("pad-holes", 0, 1 << 62, (KIND_EVENT, "skinDeformedDetection"),
-                                       limit=10_000)
+        packets, _ = reader.rows("pad-holes", 0, 1 << 62, (KIND_EVENT, "skinDeformedDetection"), limit=10_000)
         named = {p["deformedNodeID"] for r in packets for p in json.loads(r.data)["arrayOfDeformedNodes"]}
         assert packets and named and not named & set(removed)

@@ -30,6 +30,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.config import HubConfig
+from wott_hub.errors import InvalidInput, NotFound
 from wott_hub.events.plane import EventPlane
 from wott_hub.network import HubNetwork
 from wott_hub.security import AuditLog, build_policy
@@ -48,13 +49,10 @@ from .status import HubStatus
 from .things import Things
 
 if TYPE_CHECKING:
-    from sqlalchemy import Engine
-
     from wott_hub.drivers.base import Driver
-    from wott_hub.history import HistoryReader, HistoryWriter
+    from wott_hub.events.subscriber import Subscriber
     from wott_hub.mqtt.publisher import MqttPublisher
     from wott_hub.plugins.model import DeviceConfig
-    from wott_hub.runtime.pool import WorkerPool
 
 __all__ = ["Hub"]
 
@@ -63,80 +61,80 @@ class Hub:
     def __init__(self, config: HubConfig | None = None, *,
                  extra_handlers: Sequence[tuple[Any, ...]] = ()) -> None:
         self.config = cfg = config or HubConfig()
-        self.plane = EventPlane(ring_size=cfg.ring_size, max_pending=cfg.max_pending,
+        self._plane = EventPlane(ring_size=cfg.ring_size, max_pending=cfg.max_pending,
                                 durability=cfg.history_durability)
         # who may do what, TLS (wott_hub.security): a ConfigError here refuses an open non-loopback hub
-        self.policy = build_policy(cfg.security, cfg.host)
-        self.audit = AuditLog()
-        self.server = HubServer(self.plane, host=cfg.host, http_port=cfg.http_port, ws_port=cfg.ws_port,
+        self._policy = build_policy(cfg.security, cfg.host)
+        self._audit = AuditLog()
+        self._server = HubServer(self._plane, host=cfg.host, http_port=cfg.http_port, ws_port=cfg.ws_port,
                                 public_host=cfg.public_host, catalogue_port=cfg.catalogue_port,
-                                extra_handlers=extra_handlers, policy=self.policy, audit=self.audit,
+                                extra_handlers=extra_handlers, policy=self._policy, audit=self._audit,
                                 ssl_context=(server_context(cfg.security.cert, cfg.security.key)
                                              if cfg.security.cert and cfg.security.key else None))
-        self.server.ctx.heartbeat_s = cfg.heartbeat_s
+        self._server.ctx.heartbeat_s = cfg.heartbeat_s
         self.state = "stopped"
-        self.identity = hub_identity(cfg)  # in every Thing id (identity.py); read or made once, kept
-        self.history = HubHistory(cfg, self.plane, self.identity.id)
-        self.things = Things(self.plane, self.server, self.history, self.identity)
-        self.fleet = Devices(cfg, self.plane, self.things, self.history)
-        self.replay = Replays(cfg, self.plane, self.things, self.history)
+        self._identity = hub_identity(cfg)  # in every Thing id (identity.py); read or made once, kept
+        self._history = HubHistory(cfg, self._plane, self._identity.id)
+        self._things = Things(self._plane, self._server, self._history, self._identity)
+        self._fleet = Devices(cfg, self._plane, self._things, self._history)
+        self._replay = Replays(cfg, self._plane, self._things, self._history)
         # device actions and the hub Thing's addDevice/removeDevice/restartDevice (management.py)
-        self.management = FleetManagement(cfg, self.fleet, DeviceActions(self.fleet, self.plane))
-        self.status = HubStatus(self.plane, self.fleet, self.replay, self.history, lambda: self.state)
+        self._management = FleetManagement(cfg, self._fleet, DeviceActions(self._fleet, self._plane))
+        self._status = HubStatus(self._plane, self._fleet, self._replay, self._history, lambda: self.state)
         # TD directory, registrations, mDNS (src/wott_hub/network/)
-        self.network = HubNetwork(NetworkPort(cfg, self.server, self.history, self.fleet, self.identity),
+        self._network = HubNetwork(NetworkPort(cfg, self._server, self._history, self._fleet, self._identity),
                                   cfg.directory, cfg.discovery)
-        self.mqtt: MqttPublisher | None = None  # [mqtt]: made when the ports are bound
+        self._mqtt: MqttPublisher | None = None  # [mqtt]: made when the ports are bound
 
     @property
     def hub_id(self) -> str:
-        return self.identity.id
+        return self._identity.id
 
     # --- lifecycle ------------------------------------------------------------------
 
     async def start(self) -> None:
         """Serve every TD first (the fleet is visible as soon as possible), then open the
         history database and start the devices' pipelines."""
-        self.history.loop = asyncio.get_running_loop()
+        self._history.loop = asyncio.get_running_loop()
         self.state = "starting"
-        self.status.started_at = time.monotonic()
-        self.server.bind()
+        self._status.started_at = time.monotonic()
+        self._server.bind()
         if self.config.mqtt.enabled:
             self._start_mqtt()
-        td = hub_td(self.config.name, self.server.layout)
-        td["id"] = self.identity.hub_thing_id
-        self.replay.install(td)  # the replay/stopReplay actions (replay.py)
-        install_history_api(td, self.server, self.history)  # historyDevices/Records/Export
-        self.management.install(td)  # fleet actions, and every device's actions (management.py)
-        self.status.expose(self.things, td)
-        await self.fleet.open_configured()
-        await self.server.start(streams_ready=False)
+        td = hub_td(self.config.name, self._server.layout)
+        td["id"] = self._identity.hub_thing_id
+        self._replay.install(td)  # the replay/stopReplay actions (replay.py)
+        install_history_api(td, self._server, self._history)  # historyDevices/Records/Export
+        self._management.install(td)  # fleet actions, and every device's actions (management.py)
+        self._status.expose(self._things, td)
+        await self._fleet.open_configured()
+        await self._server.start(streams_ready=False)
         if self.config.history:
-            await asyncio.to_thread(self.history.open)
-            self.audit.attach(self.history.engine)  # the audit trail goes into history (audit_log)
-        await self.fleet.run_all()
-        self.server.ctx.streams_ready.set()
-        self.status.start_watching()
-        await self.network.start()  # the directory opens on the history database
-        self.fleet.live = True
-        self.management.start()  # devices that failed to open are retried with backoff
+            await asyncio.to_thread(self._history.open)
+            self._audit.attach(self._history.engine)  # the audit trail goes into history (audit_log)
+        await self._fleet.run_all()
+        self._server.ctx.streams_ready.set()
+        self._status.start_watching()
+        await self._network.start()  # the directory opens on the history database
+        self._fleet.live = True
+        self._management.start()  # devices that failed to open are retried with backoff
         self.state = "ok"
 
     async def stop(self) -> None:
         if self.state == "stopped":
             return
         self.state = "stopping"
-        self.fleet.live = False
-        await self.network.stop()
-        self.status.stop_watching()
-        self.replay.cancel_all()
-        await self.management.stop()
-        await self.fleet.stop()
-        if self.mqtt is not None:
-            await self.mqtt.stop()
-        await self.server.stop()
-        await asyncio.to_thread(self.audit.close)
-        await self.history.close()
+        self._fleet.live = False
+        await self._network.stop()
+        self._status.stop_watching()
+        self._replay.cancel_all()
+        await self._management.stop()
+        await self._fleet.stop()
+        if self._mqtt is not None:
+            await self._mqtt.stop()
+        await self._server.stop()
+        await asyncio.to_thread(self._audit.close)
+        await self._history.close()
         self.state = "stopped"
 
     def _start_mqtt(self) -> None:
@@ -149,14 +147,14 @@ class Hub:
         m = self.config.mqtt
         host, port = m.host_port(public=True)
         layout = MqttLayout(f"mqtt://{host}:{port}", m.topic_prefix(self.hub_id), m.event_qos)
-        self.server.ctx.layout = replace(self.server.layout, mqtt=layout)
-        if self.mqtt is None:
-            self.mqtt = MqttPublisher(m, layout, self.plane, client_id=f"wott-hub-{self.hub_id}")
-            self.server.on_expose.append(self.mqtt.exposed)
-            self.server.on_remove.append(self.mqtt.removed)
-            self.status.mqtt = self.mqtt
-        self.mqtt.layout = layout
-        self.mqtt.start()
+        self._server.ctx.layout = replace(self._server.layout, mqtt=layout)
+        if self._mqtt is None:
+            self._mqtt = MqttPublisher(m, layout, self._plane, client_id=f"wott-hub-{self.hub_id}")
+            self._server.on_expose.append(self._mqtt.exposed)
+            self._server.on_remove.append(self._mqtt.removed)
+            self._status.mqtt = self._mqtt
+        self._mqtt.layout = layout
+        self._mqtt.start()
 
     async def __aenter__(self) -> Hub:
         await self.start()
@@ -167,60 +165,43 @@ class Hub:
 
     def add_handlers(self, rules: Sequence[tuple[Any, ...]]) -> None:
         """Mount more routes on the hub's HTTP port (the TD directory, the web twin...)."""
-        self.server.add_handlers(rules)
+        self._server.add_handlers(rules)
 
     # --- where things are ---------------------------------------------------------------
 
     @property
     def http_url(self) -> str:
-        return self.server.layout.http_base
+        return self._server.layout.http_base
 
     @property
     def ws_url(self) -> str | None:
-        return self.server.layout.ws_base
+        return self._server.layout.ws_base
 
     def td_url(self, thing_id: str) -> str:
-        return self.server.td_url(thing_id)
+        return self._server.td_url(thing_id)
 
     @property
     def devices(self) -> dict[str, DeviceRuntime]:
-        return self.fleet.running
+        return self._fleet.running
 
     @property
     def replays(self) -> dict[str, ReplayRuntime]:
-        return self.replay.running
-
-    @property
-    def pool(self) -> WorkerPool | None:
-        """The worker processes (``[hub] workers`` > 0)."""
-        return self.fleet.pool
-
-    @property
-    def engine(self) -> Engine | None:
-        return self.history.engine
-
-    @property
-    def writer(self) -> HistoryWriter | None:
-        return self.history.writer
-
-    @property
-    def reader(self) -> HistoryReader | None:
-        return self.history.reader
+        return self._replay.running
 
     # --- what an embedding program does ------------------------------------------------------
 
     async def add_device(self, dcfg: DeviceConfig, *, run: bool = True) -> DeviceRuntime:
         """Open a configured device (``wott_hub.plugins.DeviceConfig``) and serve it."""
-        return await self.fleet.add_device(dcfg, run=run)
+        return await self._fleet.add_device(dcfg, run=run)
 
     async def add_driver(self, driver: Driver, *, device_id: str | None = None, family: str | None = None,
                          record: bool = True, run: bool = True) -> DeviceRuntime:
         """Serve an open driver as a device Thing and (``run``) start its pipeline."""
-        return await self.fleet.add_driver(driver, device_id=device_id, family=family, record=record,
+        return await self._fleet.add_driver(driver, device_id=device_id, family=family, record=record,
                                            run=run)
 
     async def remove_device(self, device_id: str) -> None:
-        await self.fleet.remove(device_id)
+        await self._fleet.remove(device_id)
 
     async def expose_thing(self, thing_id: str, td: dict[str, Any], *,
                            static_values: dict[str, Any] | None = None,
@@ -228,10 +209,10 @@ class Hub:
                            family: str = "") -> ServedThing:
         """Serve any Thing on the hub (forms and base are rewritten to the hub's layout).
 
-        Its records are published with ``hub.plane.publish(thing_id, ...)``;
+        Its records are published with ``Hub.publish(thing_id, name, value)``;
         ``record`` keeps them in history like a device's.
         """
-        return await self.things.expose(thing_id, td, static_values=static_values, dynamic=dynamic,
+        return await self._things.expose(thing_id, td, static_values=static_values, dynamic=dynamic,
                                         record=record, family=family)
 
     async def add_replay(self, device_id: str, *, t_from_ns: int | None = None, t_to_ns: int | None = None,
@@ -239,21 +220,63 @@ class Hub:
                          names: list[str] | None = None, offset_s: float = 0.0,
                          with_devices: list[str] | None = None) -> ReplayRuntime:
         """Expose a replay Thing re-emitting ``device_id``'s recorded range (``Replays.add``)."""
-        return await self.replay.add(device_id, t_from_ns=t_from_ns, t_to_ns=t_to_ns, speed=speed, loop=loop,
+        return await self._replay.add(device_id, t_from_ns=t_from_ns, t_to_ns=t_to_ns, speed=speed, loop=loop,
                                      thing_id=thing_id, names=names, offset_s=offset_s,
                                      with_devices=with_devices)
 
     def start_replay(self, rt: ReplayRuntime) -> asyncio.Task[None]:
-        return self.replay.start(rt)
+        return self._replay.start(rt)
 
     def devices_summary(self) -> list[dict[str, Any]]:
-        return self.status.devices_summary()
+        return self._status.devices_summary()
 
     def health(self) -> dict[str, Any]:
-        return self.status.health()
+        return self._status.health()
 
     def counters(self) -> dict[str, Any]:
-        return self.status.counters()
+        return self._status.counters()
+
+    def publish(self, thing_id: str, name: str, value: Any, *, kind: str = "event") -> int:
+        """Publish ``value`` (JSON-able) as an event (or, ``kind="property"``, a property change) of a
+        Thing this hub serves: numbered, recorded if the Thing is, and sent to every subscriber on every
+        binding. The sequence number it got. The way a Thing of ``expose_thing`` emits."""
+        from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, encode
+
+        if kind not in ("event", "property"):
+            raise InvalidInput(f"kind must be 'event' or 'property', got {kind!r}")
+        if thing_id not in self._plane.streams:
+            raise NotFound(f"no Thing {thing_id!r} is served by this hub")
+        try:
+            data = encode(value)
+        except (TypeError, ValueError) as e:
+            raise InvalidInput(f"{thing_id} {name}: not a JSON value ({e})") from None
+        return self._plane.publish(thing_id, KIND_EVENT if kind == "event" else KIND_PROPERTY, name,
+                                   time.time_ns(), data).seq
+
+    def subscribe(self, thing_id: str, name: str | None = None, *, kind: str = "event",
+                  after: int | None = None) -> Subscriber:
+        """A subscriber to a served Thing's events (``name`` None: all) or property changes: ``async for
+        batch in sub.batches()`` gives lists of records (``.seq``, ``.name``, ``.data`` JSON text);
+        ``after`` a sequence number to resume after (from history when it is older than the ring);
+        ``sub.close()`` ends it."""
+        from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
+
+        if kind not in ("event", "property"):
+            raise InvalidInput(f"kind must be 'event' or 'property', got {kind!r}")
+        if thing_id not in self._plane.streams:
+            raise NotFound(f"no Thing {thing_id!r} is served by this hub")
+        return self._plane.subscribe(thing_id, (KIND_EVENT if kind == "event" else KIND_PROPERTY, name),
+                                     after=after)
+
+    def flush_history(self, timeout_s: float = 30.0) -> bool:
+        """Block until every record published so far is in history (or given up on); False after
+        ``timeout_s``, and at once when history is off. For scripts and tests that read it back."""
+        writer = self._history.writer
+        return writer is not None and writer.flush(timeout_s)
+
+    async def sync_directories(self) -> None:
+        """Wait until this hub's directory and those it registers to have every change made so far."""
+        await self._network.drain()
 
     # --- printing -------------------------------------------------------------------
 
@@ -267,8 +290,8 @@ class Hub:
             "hub": self.td_url(HUB_THING_ID),
             "devices": {d.id: self.td_url(d.id) for d in self.devices.values()},
             "replays": {r.id: self.td_url(r.id) for r in self.replays.values()},
-            "failed": dict(self.fleet.failed),
-            "database": str(self.engine.url) if self.engine is not None else None,
-            "mqtt": self.mqtt.health()["broker"] if self.mqtt is not None else None,
-            **self.network.describe(),
+            "failed": dict(self._fleet.failed),
+            "database": str(self._history.engine.url) if self._history.engine is not None else None,
+            "mqtt": self._mqtt.health()["broker"] if self._mqtt is not None else None,
+            **self._network.describe(),
         }

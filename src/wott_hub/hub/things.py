@@ -50,7 +50,7 @@ class Things:
                      family: str = "") -> ServedThing:
         """Serve any Thing on the hub (forms and base are rewritten to the hub's layout).
 
-        Its records are published with ``hub.plane.publish(thing_id, ...)``;
+        Its records are published with ``Hub.publish(thing_id, name, value)``;
         ``record`` keeps them in history like a device's.
         """
         td = with_forms(td, thing_id, self.server.layout)
