@@ -179,7 +179,7 @@ def test_nobody_but_the_hub_changes_or_deletes_the_hubs_things(hub_thread, press
         ht = hub_thread(HubConfig(name="lab", http_port=0, ws_port=0, history=False,
                                   devices=(press_scene("pad"),), directory=directory)).start()
         try:
-            ht.call(ht.hub._network.drain)
+            ht.call(ht.hub.sync_directories)
             headers = {"Authorization": f"Bearer {TOKEN}"}
             with httpx.Client(base_url=ht.url, headers=headers, timeout=30) as c:
                 ids = ht.hub._identity
@@ -197,7 +197,7 @@ def test_nobody_but_the_hub_changes_or_deletes_the_hubs_things(hub_thread, press
                 assert c.put("/things/urn:ex:lamp", json=make_td("urn:ex:lamp")).status_code == 201
                 assert c.delete("/things/urn:ex:lamp").status_code == 204
                 ht.call(ht.hub.remove_device, "pad")
-                ht.call(ht.hub._network.drain)
+                ht.call(ht.hub.sync_directories)
                 assert c.get(f"/things/{ids.device_id('pad')}").status_code == 404
         finally:
             ht.stop()

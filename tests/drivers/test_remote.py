@@ -88,7 +88,7 @@ def test_a_hub_re_exposes_another_hubs_device_from_its_td_url(press_scene, wait_
             assert (desc.title, desc.family, desc.material.shore_hardness) == ("Palm via b", "wot-remote",
                                                                               "Shore 00-50")
             assert desc.epsilon_mm < example_device("flat").epsilon_mm
-            assert b.server.things.get("palm").td["title"] == "Palm via b"
+            assert b._server.things.get("palm").td["title"] == "Palm via b"
 
             # a packet -> each intensity along the inward normal; unknown nodes are dropped, reported
             packet = {"timeStamp": 7, "numOfDeformedNodes": 2, "arrayOfDeformedNodes": [

@@ -27,17 +27,17 @@ def test_adopted_from_a_known_directory_and_lost_when_deleted_there(press_scene,
         shy = Hub(HubConfig(name="shy", http_port=0, ws_port=0, history=False, directory=DirectoryConfig(
             enabled=False), discovery=DiscoveryConfig(mdns=False, browse=False, directories=(server.url,))))
         await a.start()
-        await a.network.drain()
+        await a.sync_directories()
         await b.start()
         await shy.start()
         try:
             await wait_for(lambda: "pad" in b.devices and b.devices["pad"].health_state()[0] == "ok",
                            what="b adopts a's pad")
-            assert b.network.discovery.adopted == {a.identity.device_id("pad"): "pad"}
+            assert b._network.discovery.adopted == {a._identity.device_id("pad"): "pad"}
             assert b.devices["pad"].family == "wot-remote"
             assert b.devices["pad"].driver.td["base"] == f"{a.http_url}/"
-            assert a.identity.hub_thing_id in b.network.discovery.unclaimed  # found, not tactile: not adopted
-            assert shy.devices == {} and shy.network.discovery.unclaimed == {}  # another hub's Things
+            assert a._identity.hub_thing_id in b._network.discovery.unclaimed  # found, not tactile: not adopted
+            assert shy.devices == {} and shy._network.discovery.unclaimed == {}  # another hub's Things
 
             await a.remove_device("pad")  # deleted from the fleet directory: b's copy is disconnected
             await wait_for(lambda: b.devices["pad"].health_state()[0] == "disconnected", what="lost")

@@ -21,7 +21,7 @@ LAMP = {"@context": "https://www.w3.org/2022/wot/td/v1.1", "id": "urn:example:la
 
 
 async def listing(hub: Hub) -> dict[str, dict[str, Any]]:
-    await hub._network.drain()
+    await hub.sync_directories()
     async with httpx.AsyncClient(timeout=10) as http:
         resp = await http.get(f"{hub.http_url}/things")
     assert resp.status_code == 200 and resp.headers["Content-Type"] == "application/ld+json"

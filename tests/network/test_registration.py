@@ -41,7 +41,7 @@ def test_registered_with_a_ttl_followed_and_deleted_on_a_clean_stop(tmp_path, pr
         ids = hub._identity  # every Thing id carries the hub's id (docs/scale-out.md)
         await hub.start()
         try:
-            await hub._network.drain()
+            await hub.sync_directories()
             tds = await hub_ids(fleet)
             assert set(tds) == {ids.device_id("pad"), ids.device_id("cyl"),
                                 ids.hub_thing_id}
@@ -49,7 +49,7 @@ def test_registered_with_a_ttl_followed_and_deleted_on_a_clean_stop(tmp_path, pr
             assert reg["ttl"] == 30 and "expires" in reg
             assert tds[ids.device_id("pad")]["forms"] == hub._server.things.get("pad").td["forms"]
             await hub.remove_device("cyl")
-            await hub._network.drain()
+            await hub.sync_directories()
             assert set(await hub_ids(fleet)) == {ids.device_id("pad"), ids.hub_thing_id}
         finally:
             await hub.stop()

@@ -88,8 +88,8 @@ def test_a_hub_refuses_the_id_of_another_live_hub_and_takes_over_a_dead_ones(tmp
             first = Hub(cfg("first"))
             await first.start()
             try:
-                await first.network.drain()
-                tid = first.identity.hub_thing_id
+                await first.sync_directories()
+                tid = first._identity.hub_thing_id
                 assert (await fleet.get(tid))["base"] == f"{first.http_url}/"
                 second = Hub(cfg("second"))
                 with pytest.raises(Conflict, match="cell-1.*taken.*live hub"):
@@ -106,8 +106,8 @@ def test_a_hub_refuses_the_id_of_another_live_hub_and_takes_over_a_dead_ones(tmp
             third = Hub(cfg("third"))
             await third.start()
             try:
-                await third.network.drain()
-                assert (await fleet.get(third.identity.hub_thing_id))["base"] == f"{third.http_url}/"
+                await third.sync_directories()
+                assert (await fleet.get(third._identity.hub_thing_id))["base"] == f"{third.http_url}/"
             finally:
                 await third.stop()
         finally:

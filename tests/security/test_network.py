@@ -251,10 +251,18 @@ def test_cors_answers_only_the_configured_origins_off_loopback(netns, hub, token
     assert got["other"]["cors"] is None
 
 
-def test_zz_audit_trail_and_no_secret_in_logs_or_history(netns, hub, tokens):
+def test_audit_trail_and_no_secret_in_logs_or_history(netns, hub, tokens):
     d, made = tokens
     http = hub.info["http"]
+    routes = _routes(hub)
+    # every request whose audit row is asserted below is made here: the test passes alone or in any order
+    _ask(netns[0], {"hub TD": routes["hub TD"]})  # no token: 401
+    _ask(netns[0], {"action replay": routes["action replay"]}, token=made["read"])  # 403
+    _ask(netns[0], {"action replay": routes["action replay"]}, token=made["control"])  # 200
+    td = {**_foreign_td(), "id": "urn:test:audit"}
     in_ns(netns[0], [{"id": "x", "method": "GET", "url": f"{http}/wot/hub?access_token={made['read']}"},
+                     {"id": "put", "method": "PUT", "url": f"{http}/things/{td['id']}", "token": made["admin"],
+                      "body": td, "content_type": "application/td+json"},
                      {"id": "y", "method": "POST", "url": f"{http}/wot/hub/actions/stopReplay",
                       "token": made["control"], "body": {"thing": "nothing"}}])
 
