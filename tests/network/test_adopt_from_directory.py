@@ -36,7 +36,7 @@ def test_adopted_from_a_known_directory_and_lost_when_deleted_there(press_scene,
             assert b._network.discovery.adopted == {a._identity.device_id("pad"): "pad"}
             assert b.devices["pad"].family == "wot-remote"
             assert b.devices["pad"].driver.td["base"] == f"{a.http_url}/"
-            assert a._identity.hub_thing_id in b._network.discovery.unclaimed  # found, not tactile: not adopted
+            assert a._identity.hub_thing_id in b._network.discovery.unclaimed  # found, not tactile
             assert shy.devices == {} and shy._network.discovery.unclaimed == {}  # another hub's Things
 
             await a.remove_device("pad")  # deleted from the fleet directory: b's copy is disconnected

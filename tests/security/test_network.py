@@ -261,8 +261,8 @@ def test_audit_trail_and_no_secret_in_logs_or_history(netns, hub, tokens):
     _ask(netns[0], {"action replay": routes["action replay"]}, token=made["control"])  # 200
     td = {**_foreign_td(), "id": "urn:test:audit"}
     in_ns(netns[0], [{"id": "x", "method": "GET", "url": f"{http}/wot/hub?access_token={made['read']}"},
-                     {"id": "put", "method": "PUT", "url": f"{http}/things/{td['id']}", "token": made["admin"],
-                      "body": td, "content_type": "application/td+json"},
+                     {"id": "put", "method": "PUT", "url": f"{http}/things/{td['id']}",
+                      "token": made["admin"], "body": td, "content_type": "application/td+json"},
                      {"id": "y", "method": "POST", "url": f"{http}/wot/hub/actions/stopReplay",
                       "token": made["control"], "body": {"thing": "nothing"}}])
 
