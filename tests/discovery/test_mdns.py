@@ -66,13 +66,21 @@ def test_hub_announcements_are_found_by_another_process(wait_for, run):
             await announcer.announce_directory("wott-hub-test", server.port)
             await announcer.announce_thing("barrel-1", server.port, f"/things/{barrel['id']}")
 
-            # another process browses (the real `wott-hub discover` command)
-            proc = await asyncio.create_subprocess_exec(
-                str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "3", "--json",
-                stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-            out, err = await asyncio.wait_for(proc.communicate(), 60)
-            assert proc.returncode == 0, err.decode()
-            rows = {r["name"]: r for r in json.loads(out)}
+            # another process browses (the real `wott-hub discover` command), again if a busy machine
+            # made it miss one of ours in its window
+            async def discover() -> dict[str, dict] | None:
+                proc = await asyncio.create_subprocess_exec(
+                    str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "3", "--json",
+                    stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+                out, err = await asyncio.wait_for(proc.communicate(), 60)
+                assert proc.returncode == 0, err.decode()
+                rows = {r["name"]: r for r in json.loads(out)}
+                return rows if {"wott-hub-test", "barrel-1"} <= set(rows) else None
+
+            for _ in range(5):
+                if (rows := await discover()) is not None:
+                    break
+            assert rows is not None, "discover never listed both announced services"
             tdd, thing = rows["wott-hub-test"], rows["barrel-1"]
             assert tdd["type"] == "Directory" and tdd["td_type"] == "Directory"
             assert tdd["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": "http"}
@@ -120,10 +128,12 @@ def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wai
     # discoverer-must-support-intros, -fetching, -merge-intros, -td-identify, -track
     events: list[tuple[str, FoundThing]] = []
 
+    def ours(kind):  # any other hub on this machine announces its Things too: only the simulated device
+        return lambda f: events.append((kind, f)) if f.id == "urn:example:wot-skin-7" else None
+
     async def scenario():
-        explorer = Explorer(on_found=lambda f: events.append(("found", f)),
-                            on_updated=lambda f: events.append(("updated", f)),
-                            on_lost=lambda f: events.append(("lost", f)), claim=registry.claim)
+        explorer = Explorer(on_found=ours("found"), on_updated=ours("updated"), on_lost=ours("lost"),
+                            claim=registry.claim)
         aiozc = AsyncZeroconf(interfaces=["127.0.0.1"])
         browser = Browser(aiozc, explorer.service_added, explorer.service_updated, explorer.service_removed)
         await browser.start()
@@ -147,7 +157,7 @@ def test_wot_device_is_picked_up_lost_and_updated_on_a_new_address(registry, wai
             assert kind == "updated" and again is found  # the same Thing, not a second one
             assert again.url == sim.url and "127.0.0.2" in again.url
             assert again.td["base"].startswith("http://127.0.0.2:")
-            assert again.present and list(explorer.things) == ["urn:example:wot-skin-7"]
+            assert again.present and "urn:example:wot-skin-7" in explorer.things
         finally:
             await sim.stop()
             await browser.stop()
