@@ -267,7 +267,7 @@ class _Split:
 class ContactFinder:
     """One contact per peak of each frame's deformed nodes, over one device's frame sequence.
 
-    ``segmentation`` is "peaks" (``segmentation.watershed``: two fingers whose
+    ``segmentation`` is "peaks" (``segmentation.Watershed``: two fingers whose
     valley stays above ε are two contacts) or "components" (each connected
     patch one contact, whatever its peaks: cheaper, and what the hub did before
     issue 31). ``floor``: ε, the level locations are weighed from. A held press
@@ -294,8 +294,9 @@ class ContactFinder:
              merge_ratio: float = 0.0) -> list[Contact]:
         """Contacts of ``deformed`` (ascending, not empty), whose displacement norms are ``norms``
         (``peak``: their largest, if known). ``field``: every node's norm followed by -inf, if the
-        caller has it (``count_peaks``). ``merge_mm`` and ``merge_ratio``: the watershed's
-        (``segmentation.watershed``); each contact's ``base`` is at least ``floor``."""
+        caller has it (``count_peaks``; a clamped node's value there can only hide a peak beside it,
+        which leaves its patch whole, as before issue 31). ``merge_mm`` and ``merge_ratio``: the
+        watershed's (``segmentation.Watershed``); each contact's ``base`` is at least ``floor``."""
         key = deformed.tobytes()
         split = self._split
         if split is None or key != self._key:

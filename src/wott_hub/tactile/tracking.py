@@ -3,13 +3,13 @@
 Segmentation sees one frame; a user sees fingers. So each frame's contacts are
 matched to the previous frame's tracks by distance: a track's predicted place is
 its last location moved by its last velocity over the frame's interval, and a
-contact farther than the gate from every prediction is no match (a contact of the
-very nodes a track's last contact had, a press held while the deformed set stays the
-same, is that track's without a distance). The gate
-follows the skin (``gate_mm``: a few mesh spacings, so one frame's travel of a
-fast slide stays inside it, and a neighbouring finger two tip radii away stays
-out); the assignment is greedy by distance, which is optimal for the few
-contacts a skin carries at once unless two fingers cross within one frame.
+contact farther than the gate from every prediction is no match. (A contact of the
+very nodes a track's last contact had, a press held while the deformed set stays
+the same, is that track's without a distance.) The gate follows the skin
+(``gate_mm``: a few mesh spacings, so one frame's travel of a fast slide stays
+inside it, and a neighbouring finger two tip radii away stays out); the
+assignment is greedy by distance, which is optimal for the few contacts a skin
+carries at once unless two fingers cross within one frame.
 
 What a track needs and a new contact does not is evidence: a contact that
 continues a track is kept while it is deformed at all (above ε), but a new one
