@@ -134,10 +134,15 @@ def test_epsilon_must_be_positive():
     d=arrays(np.float64, (PAD.n_nodes, 3), elements=st.floats(-1.0, 1.0)),
     sparsity=arrays(np.bool_, PAD.n_nodes),
     eps=st.floats(0.01, 0.8),
+    merge=st.sampled_from([(0.0, 0.0), (2.0, 0.1), (8.0, 0.5)]),
 )
-def test_invariants(d, sparsity, eps):
+def test_invariants(d, sparsity, eps, merge):
+    """Any field: the packet is the nodes above ε; with no birth test the contacts split every deformed
+    node into connected pieces, one per peak, and two pieces that touch are apart by a real valley."""
     d = d * sparsity[:, None]
-    proc = FrameProcessor(PAD, ProcessingParams(epsilon_mm=eps, intensity_decimals=12))
+    params = ProcessingParams(epsilon_mm=eps, intensity_decimals=12, birth_noise=0.0, merge_noise=merge[0],
+                              merge_ratio=merge[1])
+    proc = FrameProcessor(PAD, params)
     r = proc.process(TactileFrame(0, d))
     norms = np.linalg.norm(d, axis=1)
     expected = np.flatnonzero((norms > eps) & PAD.free)
@@ -149,13 +154,19 @@ def test_invariants(d, sparsity, eps):
     parts = [c.nodes for c in r.contacts]
     joined = np.sort(np.concatenate(parts)) if parts else np.empty(0, int)
     np.testing.assert_array_equal(joined, expected)
-    for nodes in parts:
-        n, _ = connected_components(PAD.adjacency[nodes][:, nodes], directed=False)
-        assert n == 1
-    # and no two contacts touch each other (else they would be one)
-    for i, a in enumerate(parts):
-        for b in parts[i + 1:]:
-            assert PAD.adjacency[a][:, b].nnz == 0
+    for c in r.contacts:
+        n, _ = connected_components(PAD.adjacency[c.nodes][:, c.nodes], directed=False)
+        assert n == 1 and c.peak == pytest.approx(norms[c.nodes].max(), rel=1e-12) and eps <= c.base < c.peak
+    assert len({c.id for c in r.contacts}) == len(r.contacts) and all(c.id > 0 for c in r.contacts)
+    # two contacts that touch: the valley between them is significantly below the lower peak
+    merge_mm = params.merge_noise * params.below_threshold_floor * eps
+    for i, a in enumerate(r.contacts):
+        for b in r.contacts[i + 1:]:
+            edges = PAD.adjacency[a.nodes][:, b.nodes].tocoo()
+            if edges.nnz:
+                saddle = np.minimum(norms[a.nodes[edges.row]], norms[b.nodes[edges.col]]).max()
+                lower = min(a.peak, b.peak)
+                assert lower - saddle > max(merge_mm, params.merge_ratio * lower)
     # a following frame at rest releases exactly what was deformed
     rel = proc.process(TactileFrame(1, np.zeros_like(d)))
     assert rel.is_release == bool(expected.size)

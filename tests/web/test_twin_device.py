@@ -87,6 +87,51 @@ def test_skin_geometry_triangulates_quads_and_dents_along_the_inward_normal(barr
     assert abs(got["z5"] - (got["rest5"] - 2 * 1.5)) < 1e-9  # 1.5 mm into the skin, shown at 2x
 
 
+def test_contacts_are_drawn_by_force_with_their_ids(barrel):
+    """render3d.js on the flat pad's TD values (issue 31): a 45 N press and a 0.5 N side lobe were drawn
+    the same; now the diamond's size and colour follow the force, each carries its contact id, and a
+    label is made once per id and let go when the contact goes."""
+    from wott_hub.examples import example_device
+    from wott_hub.td.builder import static_property_values
+
+    values = static_property_values(example_device("flat"))
+    got = barrel.evaluate(
+        """async ([nodes, cells]) => {
+          const {Skin} = await import('/twin/skin.js');
+          const {SkinView} = await import('/twin/render3d.js');
+          const box = document.createElement('div');
+          box.style.cssText = 'width: 200px; height: 150px';
+          document.body.appendChild(box);
+          const view = new SkinView(box, new Skin(nodes, cells));
+          view.setContacts([{x: 5, y: 5, z: 0, force: 45, id: 3}, {x: 15, y: 15, z: 0, force: 0.5, id: 4}]);
+          const two = view.marks, labels2 = view.labels.size;
+          view.setContacts([{x: 6, y: 5, z: 0, force: 40, id: 3}]);
+          const one = view.marks, labels1 = view.labels.size;
+          const shown = view.markers.filter((m) => m.m.visible).length;
+          view.render();
+          view.dispose();
+          box.remove();
+          return {two, one, labels2, labels1, shown};
+        }""", [values["skinNodes"], values["skinCells"]])
+    press, lobe = got["two"]
+    assert (press["id"], lobe["id"]) == (3, 4)
+    assert press["scale"] == 1.0 and lobe["scale"] < 0.5  # the lobe a speck beside the press
+    assert press["colour"] != lobe["colour"] and press["colour"][0] > press["colour"][2]  # red, not pale
+    assert got["labels2"] == 2 and got["labels1"] == 1 and got["shown"] == 1  # id 4's label let go
+    assert got["one"][0]["id"] == 3 and 0.9 < got["one"][0]["scale"] <= 1.0
+    assert barrel.errors == []
+
+
+def test_the_live_page_draws_the_hubs_contacts_with_their_ids(barrel, wait):
+    """The scene barrel's press: the page reads contactIds from contactInformation and labels them."""
+    wait(barrel, "window.twin.marks.length > 0 && window.twin.contactIds.every(i => Number.isInteger(i))",
+         timeout=15_000)
+    st = barrel.evaluate("({ids: window.twin.contactIds, marks: window.twin.marks,"
+                         " title: document.getElementById('contacts').title})")
+    assert [m["id"] for m in st["marks"]] == st["ids"] and all(i >= 1 for i in st["ids"])
+    assert st["title"].startswith(f"#{st['ids'][0]}: ")
+
+
 def test_dropped_sse_connection_resumes_without_loss(twin, barrel, wait):
     page = barrel
     wait(page, "window.twin.seqs.length >= 20", timeout=10_000)

@@ -48,10 +48,12 @@ def _xyz(values: list[float]) -> str:
 
 
 def contacts_json(res: FrameResult) -> str:
-    """``encode(res.contact_information())``: rounded to 0.1 µm / 0.1 mN as that method rounds."""
+    """``encode(res.contact_information())``: rounded to 0.1 µm / 0.1 mN as that method rounds;
+    ``contactIds`` while touched (issue 31)."""
     contacts = res.contacts
     where = ",".join([_xyz(c.location.tolist()) for c in contacts])
     force = ",".join([_xyz(c.force.tolist()) for c in contacts])
     if "n" in where or "n" in force:  # "nan"/"inf": the only letters besides x, y, z there
         raise ValueError("Out of range float values are not JSON compliant")  # as encode() says
-    return f'{{"numOfContacts":{len(contacts)},"contactLocations":[{where}],"contactForces":[{force}]}}'
+    ids = f',"contactIds":[{",".join([str(c.id) for c in contacts])}]' if contacts else ""
+    return f'{{"numOfContacts":{len(contacts)},"contactLocations":[{where}],"contactForces":[{force}]{ids}}}'

@@ -1,4 +1,4 @@
-"""Contacts: connected patches of deformed nodes, with location and force."""
+"""Contacts: the deformed nodes split into one patch per peak, each with its location and force."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from typing import Protocol
 import numpy as np
 
 from .mesh import SkinMesh
+from .segmentation import MeshGraph, Watershed, count_peaks
 
 __all__ = ["Contact", "ContactFinder", "ForceModel", "WinklerForceModel", "find_contacts", "group_patches"]
 
@@ -17,15 +18,26 @@ __all__ = ["Contact", "ContactFinder", "ForceModel", "WinklerForceModel", "find_
 WALK_MAX_NODES = 400
 
 
+_UNSET = (0.0, 0.0, 0.0)  # ``Contact.xyz`` not given: taken from ``location``
+
+
 class ForceModel(Protocol):
     """Anything that turns a patch's displacements into the force on it (N, into the skin)."""
 
     def force(self, nodes: np.ndarray, displacement: np.ndarray) -> np.ndarray: ...
 
 
-@dataclass(frozen=True, slots=True, eq=False)
+@dataclass(slots=True, eq=False)
 class Contact:
-    """One contact patch: its nodes, where it is and the force the skin feels there."""
+    """One contact: its nodes, where it is and the force the skin feels there.
+
+    ``base`` is the level its peak rises from (ε, or the valley to a higher
+    neighbouring peak): the peak's prominence is ``peak - base``. ``id`` names
+    the finger across frames (``tracking.ContactTracker``; 0 until tracked).
+    Read-only once made (a frame's contacts are shared by its records); not
+    frozen because a frozen dataclass takes 1.5 µs to build, a plain one 0.2,
+    and every frame builds one per contact.
+    """
 
     nodes: np.ndarray  # mesh node indices, ascending
     location: np.ndarray  # (3,) intensity-weighted mean rest position, mm
@@ -34,6 +46,15 @@ class Contact:
     peak: float  # largest displacement norm in the patch, mm
     shear: np.ndarray  # (3,) mean tangential displacement, mm
     depth: float  # mean normal displacement magnitude, mm
+    area: float = 0.0  # the nodes' lumped area, mm²
+    base: float = 0.0  # mm
+    id: int = 0
+    xyz: tuple[float, float, float] = _UNSET  # the location as Python floats (tracking, actions)
+
+    def __post_init__(self) -> None:
+        if self.xyz is _UNSET:
+            x, y, z = self.location.tolist()
+            self.xyz = (x, y, z)
 
 
 class WinklerForceModel:
@@ -96,62 +117,85 @@ _FIRST.setflags(write=False)
 
 
 def _node_table(mesh: SkinMesh) -> np.ndarray:
-    """Per node, what a patch's statistics gather, (1, position | normal): one gather for both."""
-    return np.column_stack([np.ones(mesh.n_nodes), mesh.nodes, mesh.normals])
+    """Per node, what a patch's statistics gather, (1, position | normal | area): one gather for all."""
+    return np.column_stack([np.ones(mesh.n_nodes), mesh.nodes, mesh.normals, mesh.node_areas])
 
 
 class _Patches:
-    """One deformed set split into patches, with what the statistics of any frame need of it.
+    """A deformed set split into patches, with what the statistics of any frame need of it.
 
-    The per-node terms of the statistics are the columns of one (nodes x 8)
-    array, weight x (1, position) | tangential displacement | normal depth, so
-    one ``reduceat`` sums them all; a column sums exactly as the same values
-    would alone, so the numbers are those of one reduction per statistic. The
-    array is kept here and refilled each frame. The nodes' constants come from
-    one gather of the finder's ``_node_table`` (a moving press makes a new set
-    almost every frame, and pays this set-up each time).
+    ``nodes`` are the set's nodes grouped by patch (``counts`` each), ``order``
+    where each sits in the deformed set (None: in the set's own order, one
+    patch). The per-node terms of the statistics are the columns of one
+    (nodes x 12) array, weight x (1, position) | tangential displacement |
+    normal depth | area | Winkler force k_i D_i, so one ``reduceat`` sums them
+    all, for one patch or ten; a column sums exactly as the same values would
+    alone, so the numbers are those of one reduction per statistic. The array is
+    kept here and refilled each frame (the area column once). The weight is a
+    node's norm above ``floor`` (ε): its norm times (1, position) less the
+    constant ``floor_terms`` (floor x the patch's sums of (1, position), taken off the
+    sums: one small subtraction a frame). The nodes' constants come from one gather of the
+    finder's ``_node_table``; the spring constants (``stiffness``, a column) of
+    the force model's, if it is a Winkler bed (another model is asked per patch).
     """
 
-    __slots__ = ("bounds", "counts", "depth", "nodes", "normals", "order", "patches", "positions", "starts",
-                 "stiffness", "tangential", "terms", "weighted")
+    __slots__ = ("bounds", "counts", "depth", "floor_terms", "force", "n", "nodes", "normals", "order",
+                 "patches", "positions", "starts", "stiffness", "tangential", "terms", "weighted")
 
-    def __init__(self, mesh: SkinMesh, deformed: np.ndarray, force_model: ForceModel,
-                 table: np.ndarray) -> None:
-        nodes, counts = group_patches(mesh, deformed)
+    def __init__(self, nodes: np.ndarray, counts: np.ndarray, order: np.ndarray | None,
+                 force_model: ForceModel, table: np.ndarray, floor: float) -> None:
         nodes.setflags(write=False)  # shared by the contacts of every frame that reuses this split
         self.nodes = nodes
         self.counts: np.ndarray | float
-        if len(counts) == 1:  # one patch (the common case): no reordering, no bounds to compute
-            self.order = None
+        self.order = order
+        self.n = counts.tolist()
+        if len(counts) == 1:  # one patch (the common case): no bounds to compute
             self.starts = _FIRST
             self.counts = float(len(nodes))
             self.bounds = [(0, len(nodes))]
             self.patches = [nodes]
         else:
-            # where each of ``nodes`` sits in the deformed set
-            self.order = np.searchsorted(deformed, nodes)
             ends = np.cumsum(counts)
             self.starts = ends - counts
             self.counts = counts[:, None].astype(np.float64)
             self.bounds = list(zip(self.starts.tolist(), ends.tolist(), strict=True))
             self.patches = [nodes[a:b] for a, b in self.bounds]
         rows = table[nodes]
-        self.positions, self.normals = rows[:, :4], rows[:, 4:]
-        # the Winkler force is a product with the patch's spring constants: gathered once here
-        # (contiguous: a strided vector takes another BLAS path, whose last bit may differ)
-        self.stiffness: list[np.ndarray] | None = None
+        self.positions, self.normals = rows[:, :4], rows[:, 4:7]
+        self.floor_terms = floor * np.add.reduceat(self.positions, self.starts) if floor else None
+        self.stiffness: np.ndarray | None = None
         if isinstance(force_model, WinklerForceModel):
-            k = force_model.node_stiffness[nodes]
-            self.stiffness = [k[a:b] for a, b in self.bounds]
-        self.terms = np.empty((len(nodes), 8))
+            self.stiffness = force_model.node_stiffness[nodes][:, None]
+        self.terms = np.empty((len(nodes), 12))
         self.weighted, self.tangential, self.depth = self.terms[:, :4], self.terms[:, 4:7], self.terms[:, 7]
+        self.force = self.terms[:, 9:12]
+        self.terms[:, 8] = rows[:, 7]
+        if self.stiffness is None:
+            self.force[:] = 0.0
+
+
+def _components(mesh: SkinMesh, deformed: np.ndarray, force_model: ForceModel, table: np.ndarray,
+                floor: float) -> _Patches:
+    """The connected patches of ``deformed`` (``group_patches``)."""
+    nodes, counts = group_patches(mesh, deformed)
+    order = None if len(counts) == 1 else np.searchsorted(deformed, nodes)
+    return _Patches(nodes, counts, order, force_model, table, floor)
 
 
 def _contacts(p: _Patches, norms: np.ndarray, displacement: np.ndarray, force_model: ForceModel,
-              min_nodes: int, peak: float | None = None) -> list[Contact]:
+              min_nodes: int, floor: float, peak: float | None = None, bases: list[float] | None = None
+              ) -> list[Contact]:
     """Every statistic of every patch from one ``reduceat`` over the nodes grouped by patch: a frame
     costs the same few array operations whether it has one contact or ten. ``peak``: the largest
-    of ``norms`` if the caller has it (one patch then needs no max of its own)."""
+    of ``norms`` if the caller has it (one patch then needs no max of its own); ``bases``: each
+    patch's base (default ``floor``).
+
+    The location weighs each node by how far its norm rises above ``floor`` (ε), not by the
+    whole norm: a node crossing ε then moves the location continuously instead of by a jump
+    (a coarse mesh's contact would lurch as a press ramps in or out, a false speed). A patch
+    of nodes that belong to no cell (a mesh with a hole in its cells) has no area: it is
+    reported in the packet, but no skin there carries a force, so it is no contact.
+    """
     w = norms if p.order is None else norms[p.order]
     d = displacement[p.nodes]
     n = p.normals
@@ -160,28 +204,30 @@ def _contacts(p: _Patches, norms: np.ndarray, displacement: np.ndarray, force_mo
     np.multiply(normal[:, None], n, out=p.tangential)
     np.subtract(d, p.tangential, out=p.tangential)
     np.abs(normal, out=p.depth)
+    if p.stiffness is not None:
+        np.multiply(p.stiffness, d, out=p.force)
     sums = np.add.reduceat(p.terms, p.starts)
-    sums[:, 1:4] /= sums[:, :1]  # location: intensity-weighted mean
-    sums[:, 4:] /= p.counts  # shear and depth: plain means
+    if p.floor_terms is not None:  # the weights less ε: Σ (w - ε)(1, x) = Σ w (1, x) - ε Σ (1, x)
+        sums[:, :4] -= p.floor_terms
+    sums[:, 1:4] /= sums[:, :1]  # location: weighted mean
+    sums[:, 4:8] /= p.counts  # shear and depth: plain means
     rows = sums.tolist()
     if len(rows) == 1:
         ranked: list[int] | tuple[int] = (0,)
         peaks = [float(w.max()) if peak is None else peak]
     else:  # the largest contact first; ties keep patch order, as argsort(-total, kind="stable")
-        ranked = sorted(range(len(rows)), key=lambda c: -rows[c][0])
+        ranked = sorted(range(len(rows)), key=lambda c: -(rows[c][0] + floor * p.n[c]))
         peaks = np.maximum.reduceat(w, p.starts).tolist()
     contacts = []
     for c in ranked:
         patch = p.patches[c]
-        if len(patch) < min_nodes:
+        if len(patch) < min_nodes or rows[c][8] <= 0.0:  # too small, or nodes in no cell: no skin, no contact
             continue
-        if p.stiffness is None:
-            force = force_model.force(patch, displacement)
-        else:
-            a, b = p.bounds[c]
-            force = p.stiffness[c] @ (d if len(rows) == 1 else d[a:b])
         row = sums[c]
-        contacts.append(Contact(patch, row[1:4], force, rows[c][0], peaks[c], row[4:7], rows[c][7]))
+        force = row[9:12] if p.stiffness is not None else force_model.force(patch, displacement)
+        r = rows[c]
+        contacts.append(Contact(patch, row[1:4], force, r[0] + floor * p.n[c], peaks[c], row[4:7], r[7], r[8],
+                                floor if bases is None else bases[c], 0, (r[1], r[2], r[3])))
     return contacts
 
 
@@ -193,40 +239,93 @@ def find_contacts(
     force_model: ForceModel,
     min_nodes: int = 1,
 ) -> list[Contact]:
-    """Split the deformed nodes into connected patches on the mesh graph.
+    """Split the deformed nodes into connected patches on the mesh graph (no split by peak).
 
     ``deformed`` holds node indices (ascending), ``intensity`` the displacement
     norm of every node. Patches smaller than ``min_nodes`` are dropped as noise.
     """
     if deformed.size == 0:
         return []
-    return _contacts(_Patches(mesh, deformed, force_model, _node_table(mesh)), intensity[deformed],
-                     displacement, force_model, min_nodes)
+    return _contacts(_components(mesh, deformed, force_model, _node_table(mesh), 0.0), intensity[deformed],
+                     displacement, force_model, min_nodes, 0.0)
+
+
+class _Split:
+    """What is kept of one deformed set: its connected patches, its neighbourhood and watershed when
+    first needed, and its last split by peak (reused while the watershed groups its nodes the same way)."""
+
+    __slots__ = ("components", "n_components", "nbh", "peaks", "peaks_key", "watershed")
+
+    def __init__(self, components: _Patches) -> None:
+        self.components, self.n_components = components, len(components.patches)
+        self.nbh: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.watershed: Watershed | None = None
+        self.peaks: _Patches | None = None
+        self.peaks_key = b""
 
 
 class ContactFinder:
-    """``find_contacts`` over one device's frame sequence, given the deformed nodes' norms only.
+    """One contact per peak of each frame's deformed nodes, over one device's frame sequence.
 
-    A held press deforms the same nodes frame after frame (about 9 frames in 10
-    of the hub benchmark's moving press), so the split into patches and the
-    per-node gathers it allows are kept for the last deformed set and reused
-    while it stays the same: only the displacement-dependent statistics are
-    computed again.
+    ``segmentation`` is "peaks" (``segmentation.Watershed``: two fingers whose
+    valley stays above ε are two contacts) or "components" (each connected
+    patch one contact, whatever its peaks: cheaper, and what the hub did before
+    issue 31). ``floor``: ε, the level locations are weighed from. A held press
+    deforms the same nodes frame after frame (about 9 frames in 10 of the hub
+    benchmark's moving press), so the split into patches, the gathers it allows
+    and the set's neighbourhood are kept for the last deformed set and reused
+    while it stays the same. A patch with a single maximum (a smooth press) is
+    one contact without a watershed.
     """
 
-    def __init__(self, mesh: SkinMesh, force_model: ForceModel, min_nodes: int = 1) -> None:
-        self.mesh, self.force_model, self.min_nodes = mesh, force_model, min_nodes
+    def __init__(self, mesh: SkinMesh, force_model: ForceModel, min_nodes: int = 1,
+                 segmentation: str = "peaks", floor: float = 0.0) -> None:
+        if segmentation not in ("peaks", "components"):
+            raise ValueError(f"segmentation must be 'peaks' or 'components', got {segmentation!r}")
+        self.mesh, self.force_model, self.min_nodes, self.floor = mesh, force_model, min_nodes, floor
+        self.by_peaks = segmentation == "peaks"
         self._table = _node_table(mesh)
+        self._graph: MeshGraph | None = None
         self._key = b""
-        self._patches: _Patches | None = None
+        self._split: _Split | None = None
 
     def find(self, deformed: np.ndarray, norms: np.ndarray, displacement: np.ndarray,
-             peak: float | None = None) -> list[Contact]:
+             peak: float | None = None, field: np.ndarray | None = None, merge_mm: float = 0.0,
+             merge_ratio: float = 0.0) -> list[Contact]:
         """Contacts of ``deformed`` (ascending, not empty), whose displacement norms are ``norms``
-        (``peak``: their largest, if known)."""
+        (``peak``: their largest, if known). ``field``: every node's norm followed by -inf, if the
+        caller has it (``count_peaks``; a clamped node's value there can only hide a peak beside it,
+        which leaves its patch whole, as before issue 31). ``merge_mm`` and ``merge_ratio``: the
+        watershed's (``segmentation.Watershed``); each contact's ``base`` is at least ``floor``."""
         key = deformed.tobytes()
-        p = self._patches
-        if p is None or key != self._key:
-            p = self._patches = _Patches(self.mesh, deformed, self.force_model, self._table)
+        split = self._split
+        if split is None or key != self._key:
+            split = self._split = _Split(_components(self.mesh, deformed, self.force_model, self._table,
+                                                     self.floor))
             self._key = key
-        return _contacts(p, norms, displacement, self.force_model, self.min_nodes, peak)
+        floor = self.floor
+        if self.by_peaks:
+            graph = self._graph
+            if graph is None:
+                graph = self._graph = MeshGraph(self.mesh)
+            nbh = split.nbh
+            if nbh is None:
+                nbh = split.nbh = graph.neighbours_of(deformed)
+            rows, flat, starts = nbh
+            if field is None:
+                field = np.full(self.mesh.n_nodes + 1, -np.inf)
+                field[deformed] = norms
+            if count_peaks(flat, starts, field, norms) > split.n_components:  # else one peak a patch
+                ws = split.watershed
+                if ws is None:
+                    ws = split.watershed = Watershed(graph, deformed, rows)
+                seg = ws.split(norms, floor, merge_mm, merge_ratio)
+                if len(seg.counts) > split.n_components:  # else the extra maxima merged: the patches again
+                    p = split.peaks
+                    if p is None or seg.key != split.peaks_key:
+                        p = split.peaks = _Patches(deformed[seg.order], seg.counts, seg.order,
+                                                   self.force_model, self._table, floor)
+                        split.peaks_key = seg.key
+                    return _contacts(p, norms, displacement, self.force_model, self.min_nodes, floor, None,
+                                     seg.base)
+        return _contacts(split.components, norms, displacement, self.force_model, self.min_nodes, floor, peak)

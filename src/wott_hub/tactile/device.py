@@ -38,7 +38,13 @@ class CoordinateFrame:
 
 @dataclass(frozen=True)
 class DeviceDescription:
-    """Everything needed to build a device's Tactile TD and to process its frames."""
+    """Everything needed to build a device's Tactile TD and to process its frames.
+
+    ``side_lobe_ratio``: the largest spurious peak the device's estimate makes
+    beside a press, as a fraction of the press's peak (a camera model's side
+    lobes; 0 for a device that measures each node directly). Processing drops
+    contacts weaker than that beside a stronger one (docs/processing.md).
+    """
 
     id: str
     title: str
@@ -50,3 +56,4 @@ class DeviceDescription:
     epsilon_mm: float = 0.1
     thickness_mm: float = 3.0
     description: str = ""
+    side_lobe_ratio: float = 0.0

@@ -27,6 +27,7 @@ __all__ = [
     "cylinder",
     "flat_pad",
     "load_taclink_barrel",
+    "mesh_spacing",
     "taclink_barrel",
 ]
 
@@ -106,7 +107,7 @@ class SkinMesh:
         return np.unique(pairs, axis=0)
 
     @cached_property
-    def _neighbour_csr(self) -> tuple[np.ndarray, np.ndarray]:
+    def neighbour_csr(self) -> tuple[np.ndarray, np.ndarray]:
         """(indptr, indices) of every node's neighbours, ascending: the adjacency without SciPy."""
         e = self.edges
         rows = np.concatenate([e[:, 0], e[:, 1]])
@@ -121,7 +122,7 @@ class SkinMesh:
         """Symmetric node adjacency (N x N, CSR, ones on edges)."""
         import scipy.sparse as sp
 
-        indptr, indices = self._neighbour_csr
+        indptr, indices = self.neighbour_csr
         n = self.n_nodes
         return sp.csr_matrix((np.ones(len(indices), dtype=np.int8), indices, indptr), shape=(n, n))
 
@@ -129,12 +130,12 @@ class SkinMesh:
     def neighbour_lists(self) -> tuple[tuple[int, ...], ...]:
         """Each node's neighbours as Python ints: a walk over a few dozen nodes (a contact patch)
         is several times faster on tuples than on arrays or a sparse matrix."""
-        indptr, indices = self._neighbour_csr
+        indptr, indices = self.neighbour_csr
         flat = indices.tolist()
         return tuple(tuple(flat[a:b]) for a, b in zip(indptr[:-1].tolist(), indptr[1:].tolist(), strict=True))
 
     def neighbours(self, node: int) -> np.ndarray:
-        indptr, indices = self._neighbour_csr
+        indptr, indices = self.neighbour_csr
         return indices[indptr[node] : indptr[node + 1]]
 
     # -- geometry ------------------------------------------------------------
@@ -185,6 +186,14 @@ class SkinMesh:
 
     def with_free(self, free: np.ndarray) -> SkinMesh:
         return SkinMesh(self.nodes, self.cells, free, self.name)
+
+
+def mesh_spacing(mesh: SkinMesh) -> float:
+    """The median edge length (mm): the scale of what the mesh can resolve."""
+    e = mesh.edges
+    if not len(e):
+        return 1.0
+    return float(np.median(np.linalg.norm(mesh.nodes[e[:, 0]] - mesh.nodes[e[:, 1]], axis=1)))
 
 
 def _normalise(v: np.ndarray) -> np.ndarray:

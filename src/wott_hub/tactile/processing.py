@@ -25,7 +25,8 @@ import numpy as np
 from .actions import ActionDetector, ActionEvidence, ActionParams
 from .contacts import Contact, ContactFinder, ForceModel, WinklerForceModel
 from .frame import FrameError, TactileFrame
-from .mesh import SkinMesh
+from .mesh import SkinMesh, mesh_spacing
+from .tracking import ContactTracker
 
 if TYPE_CHECKING:
     from .device import DeviceDescription
@@ -49,18 +50,29 @@ class ProcessingParams:
     # assembled stiffness (wott_hub.tactile.mechanics), exact for quasi-static presses
     force_model: str = "winkler"
     below_threshold_s: float = 1.0  # a press this long in [floor x ε, ε] gets a health note; 0: never
-    below_threshold_floor: float = BELOW_THRESHOLD_FLOOR  # x epsilon
+    below_threshold_floor: float = BELOW_THRESHOLD_FLOOR  # x epsilon: the device's declared rest noise
+    # contacts (docs/processing.md, "Contacts"): "peaks" (a watershed) or "components" (connected sets)
+    segmentation: str = "peaks"
+    merge_noise: float = 2.0  # two peaks stay apart if their valley is this many noise floors below the lower
+    merge_ratio: float = 0.1  # ... and this fraction of it
+    birth_noise: float = 1.0  # a new contact's peak rises this many noise floors above its base
+    side_lobe_ratio: float = 0.0  # contacts weaker than this fraction of the strongest: artefacts
+    track_gate_mm: float | None = None  # None: 3 mesh spacings
 
 
 def processing_params(desc: DeviceDescription) -> ProcessingParams:
     """Processing settings from what the device says about itself."""
     return ProcessingParams(epsilon_mm=desc.epsilon_mm, modulus_mpa=desc.material.modulus_mpa,
-                            thickness_mm=desc.thickness_mm)
+                            thickness_mm=desc.thickness_mm, side_lobe_ratio=desc.side_lobe_ratio)
 
 
-@dataclass(frozen=True, slots=True, eq=False)
+@dataclass(slots=True, eq=False)
 class FrameResult:
-    """What one frame produced. ``deformed`` is None when no packet is due."""
+    """What one frame produced. ``deformed`` is None when no packet is due.
+
+    Read-only once made (the pipeline's records of a frame share it); not frozen because a
+    frozen dataclass of eight fields takes about 1 µs more to build, on every frame.
+    """
 
     t_ns: int
     deformed_nodes: np.ndarray  # indices with ‖D‖ > ε, ascending
@@ -94,12 +106,15 @@ class FrameResult:
         }
 
     def contact_information(self) -> dict[str, Any]:
-        """The ``contactInformation`` property value for this frame."""
-        return {
+        """The ``contactInformation`` property value for this frame (``contactIds`` while touched)."""
+        info: dict[str, Any] = {
             "numOfContacts": len(self.contacts),
             "contactLocations": [_xyz(c.location) for c in self.contacts],
             "contactForces": [_xyz(c.force) for c in self.contacts],
         }
+        if self.contacts:
+            info["contactIds"] = [c.id for c in self.contacts]
+        return info
 
 
 def _xyz(v: np.ndarray) -> dict[str, float]:
@@ -126,12 +141,16 @@ class FrameProcessor:
             self._force = StiffnessForceModel(mesh, p.modulus_mpa, p.thickness_mm)
         else:
             raise ValueError(f"force_model must be 'winkler' or 'stiffness', got {p.force_model!r}")
-        self._contacts = ContactFinder(mesh, self._force, p.min_contact_nodes)
+        self._contacts = ContactFinder(mesh, self._force, p.min_contact_nodes, p.segmentation, p.epsilon_mm)
+        self._tracker = ContactTracker(p.track_gate_mm or 3.0 * mesh_spacing(mesh))
         self._actions = ActionDetector(p.actions)
         # np.round multiplies by 10**decimals, rints and divides; 10**k is exact as a float up to 22
         k = p.intensity_decimals
         self._round_factor = float(10**k) if 0 <= k <= 22 else None
         self._prev_deformed = np.empty(0, dtype=np.int64)
+        self._field = np.full(mesh.n_nodes + 1, -np.inf)  # every node's norm, then -inf (contacts.find)
+        self._norm = self._field[:-1]
+        self._merge_ratio, self._side_lobes = p.merge_ratio, p.side_lobe_ratio
         self._last_t: int | None = None
         self.below_note = ""  # see the module doc; "" while nothing is pressed below ε for long
         self._below_since: int | None = None
@@ -141,9 +160,17 @@ class FrameProcessor:
         """Floor (x ε) and duration (s, 0: never) of the below-threshold note (the driver's, if it says)."""
         eps = self.params.epsilon_mm
         self._below_lo, self._below_ns = floor * eps, int(seconds * 1e9)
+        p = self.params
+        self._merge_mm, self._birth_mm = p.merge_noise * self._below_lo, p.birth_noise * self._below_lo
         self._below_text = (f"below threshold: displaced {floor * eps:g}-{eps:g} mm (epsilon {eps:g} mm) "
                             f"for over {seconds:g} s: not reported")
         self.below_note, self._below_since = "", None
+
+    @property
+    def noise_mm(self) -> float:
+        """The noise floor the contact thresholds scale with (mm): the device's rest noise as it
+        declares it (``below_threshold_floor`` x ε; docs/processing.md, "Contacts")."""
+        return self._below_lo
 
     def process(self, frame: TactileFrame) -> FrameResult:
         d = frame.displacement
@@ -154,7 +181,7 @@ class FrameProcessor:
             raise FrameError(f"frame time {t_ns} ns goes back from {self._last_t} ns")
         self._last_t = t_ns
         # every node's norm, then the clamped ones masked out: cheaper than gathering the free rows
-        norm = np.einsum("ij,ij->i", d, d)
+        norm = np.einsum("ij,ij->i", d, d, out=self._norm)
         np.sqrt(norm, out=norm)
         deformed = (norm > self._threshold).nonzero()[0]
         if deformed.size:
@@ -162,13 +189,16 @@ class FrameProcessor:
             peak = float(np.maximum.reduce(norms))
             if not math.isfinite(peak):  # finite but huge displacements overflow ‖D‖
                 raise FrameError("displacement too large: its norm overflows (check the driver's scale)")
-            contacts = self._contacts.find(deformed, norms, d, peak)
+            contacts = self._tracker.update(t_ns, self._contacts.find(
+                deformed, norms, d, peak, self._field, self._merge_mm, self._merge_ratio), self._birth_mm,
+                self._side_lobes)
             intensity = self._round(norms)
             is_release, due = False, True
             self._below_since, self.below_note = None, ""
             self._prev_deformed = deformed
         else:
             contacts = []
+            self._tracker.reset()
             if self._below_ns:  # one max over the norms already computed; NaN compares false
                 if norm.max(initial=0.0, where=self._free_mask) > self._below_lo:
                     if self._below_since is None:

@@ -121,6 +121,11 @@ PROPERTIES: dict[str, dict[str, Any]] = {
             "numOfContacts": {"type": "integer", "minimum": 0},
             "contactLocations": {"type": "array", "items": xyz("mm")},
             "contactForces": {"type": "array", "items": xyz("N")},
+            # ours (issue 31), optional: a hub without tracking, or with no contact, leaves it out
+            "contactIds": {"type": "array", "items": {"type": "integer", "minimum": 1},
+                           "description": ("Each contact's id, in the order of contactLocations: the "
+                                           "same finger keeps its id from one value to the next while "
+                                           "it touches.")},
         },
         "required": ["numOfContacts", "contactLocations", "contactForces"],
     },
@@ -226,6 +231,8 @@ DETAIL_EVENTS: dict[str, dict[str, Any]] = {
                         "speedMmPerS": {"type": "number", "minimum": 0, "unit": "mm.s-1"},
                         "moveMm": {"type": "number", "minimum": 0, "unit": "mm"},
                         "approachMm": {"type": "number", "unit": "mm"},
+                        "contactId": {"type": "integer", "minimum": 1,
+                                      "description": "The contact (contactIds) the action was decided on."},
                     },
                     "required": ["contacts", "durationS", "speedMmPerS"],
                 },

@@ -33,10 +33,13 @@ if TYPE_CHECKING:  # the driver's modules import cv2: loaded when a device opens
     from .driver import BarrelDriver, CameraPair
     from .geometry import BarrelLayout
 
-__all__ = ["FAMILY", "SCHEMA", "BarrelSettings", "CamerasTable", "DetectorTable", "TrackerTable",
-           "build_layout", "demo_scene_path", "open_barrel"]
+__all__ = ["FAMILY", "SCHEMA", "SIDE_LOBE_RATIO", "BarrelSettings", "CamerasTable", "DetectorTable",
+           "TrackerTable", "build_layout", "demo_scene_path", "open_barrel"]
 
 FAMILY = "barrel-vision"
+SIDE_LOBE_RATIO = 0.2
+"""The displacement model's side lobes beside a press peak at up to 0.14 of the press's own
+peak (``wott-hub bench accuracy``, docs/processing.md): weaker contacts beside it are not fingers."""
 
 
 def demo_scene_path() -> Path:
@@ -136,7 +139,7 @@ def describe(device_id: str, s: BarrelSettings, layout: BarrelLayout) -> DeviceD
         id=device_id, title=s.title or device_id, family=FAMILY,
         shape=SkinShape("barrel", height_mm=260.0, base_radius_mm=36.28, middle_radius_mm=53.36),
         material=MATERIALS[s.material], mesh=layout.mesh, epsilon_mm=s.epsilon_mm,
-        thickness_mm=3.0,
+        thickness_mm=3.0, side_lobe_ratio=SIDE_LOBE_RATIO,
         description="TacLink-style barrel skin: 16 x 16 markers seen by two fisheye cameras, "
                     "marker tracking and an ONNX model to the 585 free nodes' displacement.",
     )

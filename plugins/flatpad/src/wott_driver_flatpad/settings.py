@@ -37,9 +37,14 @@ if TYPE_CHECKING:  # the driver and camera modules import cv2: loaded when a dev
 
     from .driver import FlatPadDriver
 
-__all__ = ["FAMILY", "SCHEMA", "OpticsTable", "PadRenderTable", "PadSettings", "demo_scene_path", "open_pad"]
+__all__ = ["FAMILY", "SCHEMA", "SIDE_LOBE_RATIO", "OpticsTable", "PadRenderTable", "PadSettings",
+           "demo_scene_path", "open_pad"]
 
 FAMILY = "flat-vision"
+SIDE_LOBE_RATIO = 0.2
+"""The depth estimate's spurious one-marker peaks beside a press reach 0.18 of the press's own peak
+(next to the clamped border; ``wott-hub bench accuracy``, docs/processing.md): weaker contacts beside
+a stronger one are not fingers."""
 
 
 def demo_scene_path() -> Path:
@@ -128,6 +133,7 @@ def describe(device_id: str, s: PadSettings, layout: PadLayout) -> DeviceDescrip
         shape=SkinShape("rectangularPrism", length_mm=span_x, width_mm=span_y, height_mm=s.thickness_mm),
         material=MATERIALS[s.material], mesh=layout.mesh, epsilon_mm=s.epsilon_mm,
         thickness_mm=s.thickness_mm, frame=CoordinateFrame(origin_name="cornerOfPad"),
+        side_lobe_ratio=SIDE_LOBE_RATIO,
         description=f"Flat vision pad: {layout.rows}x{layout.cols} markers at {layout.pitch_mm} mm, "
                     f"one camera at {layout.optics.px_per_mm:.1f} px/mm.",
     )

@@ -7,6 +7,11 @@ when its generator was abandoned rather than closed. The exception that ended
 a stream stays in ``health()`` (``frames() failed: ...``) and, after the
 restart, as a suffix of the link's health until a frame gets through again:
 the cause is never replaced by a symptom of the restart.
+
+Frame times are the board's cadence on the hub's clock (``FrameClock``: its
+sequence numbers against the arrival times, fitted), not the arrival times
+themselves, which bunch and stretch with the reads; each ``frames()`` call starts
+a new line.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from wott_hub.plugin_api import (
     Tareable,
 )
 
+from .clock import FrameClock
 from .compliance import Compliance
 from .protocol import Counters
 from .reader import SerialReader
@@ -71,6 +77,8 @@ class TaxelDriver(Driver, Tareable):
         self.simulator = simulator
         self.counters = Counters()
         self.last_seq: int | None = None
+        # the board's period, until measured: the simulator's rate, unknown for a real board
+        self.clock = FrameClock(1.0 / simulator.rate_hz if simulator is not None else None)
         self._backoff = backoff
         self._opener = opener
         self._reader: SerialReader | None = None
@@ -92,10 +100,13 @@ class TaxelDriver(Driver, Tareable):
             backoff=self._backoff, opener=self._opener, on_health=self._on_link_health,
         )
         compliance = self.compliance
+        clock = self.clock
+        clock.reset()
         failed = False
         try:
-            async for t_ns, raw in reader.frames():
+            async for arrival_ns, raw in reader.frames():
                 self.last_seq = raw.seq
+                t_ns = clock.stamp(raw.seq, arrival_ns)
                 counts = raw.values.astype(np.float64)
                 if self._tare_next:  # this frame's readings are the new zero
                     self._zero, self._tare_next = counts.copy(), False

@@ -19,7 +19,8 @@ const LOG = 100000; // delay samples kept for the benchmark (window.__twinStats)
 const state = (window.twin = {
   page: "device", ready: false, thing: null, title: null, mode: "live", nodes: 0, cells: 0,
   packets: 0, frames: 0, last: null, applied: null, drawn: null, onsets: [], seqs: [], stream: null, reconnects: 0,
-  action: null, actions: [], contacts: 0, delays: {net: [], draw: [], e2e: []}, errors: [], cmax: 1,
+  action: null, actions: [], contacts: 0, contactIds: [], marks: [], delays: {net: [], draw: [], e2e: []},
+  errors: [], cmax: 1,
   freeze: false, // hold the picture (events are still received and counted)
 });
 
@@ -175,13 +176,19 @@ function onAction(action) {
   }));
 }
 
+// contactInformation: each contact's location, force and (from hubs with tracking, issue 31) its id
 function setContacts(value) {
   state.contacts = value.numOfContacts || 0;
   $("contacts").textContent = state.contacts;
-  const loc = value.contactLocations || [], f = value.contactForces || [];
-  const text = f.map((v) => `${Math.hypot(v.x, v.y, v.z).toFixed(2)} N`);
-  $("contacts").title = text.join(", ");
-  if (view3d) view3d.setContacts(loc);
+  const loc = value.contactLocations || [], f = value.contactForces || [], ids = value.contactIds || [];
+  const contacts = loc.map((p, k) => ({x: p.x, y: p.y, z: p.z, id: ids[k] ?? null,
+    force: f[k] ? Math.hypot(f[k].x, f[k].y, f[k].z) : 0}));
+  state.contactIds = contacts.map((c) => c.id);
+  $("contacts").title = contacts.map((c) => `${c.id == null ? "" : `#${c.id}: `}${c.force.toFixed(2)} N`).join(", ");
+  if (view3d) {
+    view3d.setContacts(contacts);
+    state.marks = view3d.marks;
+  }
 }
 
 function streamState(s, stream) {

@@ -98,7 +98,10 @@ export class SkinView {
     });
     this.markers = [];
     this.markerGeometry = new THREE.OctahedronGeometry(Math.max(span / 70, 1));
-    this.markerMaterial = new THREE.MeshBasicMaterial({color: 0x111111});
+    this.markerSize = Math.max(span / 70, 1); // the diamond's radius at full force
+    this.fmax = 0; // the largest contact force drawn lately, N (decays): the scale of every marker
+    this.labels = new Map(); // contact id -> its label's texture, while shown
+    this.marks = []; // what the last setContacts drew: [{id, force, scale, colour}] (for the tests)
     this.resize = new ResizeObserver(() => this.fit());
     this.resize.observe(container);
     this.fit();
@@ -210,17 +213,74 @@ export class SkinView {
     this.uploaded = runs.reduce((k, [a, b]) => k + b - a, 0); // vertices sent by the last update
   }
 
-  setContacts(locations) {
-    while (this.markers.length < locations.length) {
-      const m = new THREE.Mesh(this.markerGeometry, this.markerMaterial);
-      this.scene.add(m);
-      this.markers.push(m);
+  // One diamond per contact at its location, sized and coloured by its force against the largest
+  // force drawn lately (a 0.5 N side lobe is a speck beside a 45 N press; square root: the
+  // diamond's area follows the force; the memory fades by 1 % an update, so a light touch after a
+  // hard one is drawn full size again within seconds), with the contact's id above it, so two
+  // fingers read as two and keep their labels while they move.
+  // ``contacts``: [{x, y, z, force (N), id (or null)}].
+  setContacts(contacts) {
+    this.fmax *= 0.99;
+    for (const c of contacts) this.fmax = Math.max(this.fmax, c.force);
+    while (this.markers.length < contacts.length) {
+      const m = new THREE.Mesh(this.markerGeometry, new THREE.MeshBasicMaterial({color: 0x111111}));
+      const label = new THREE.Sprite(new THREE.SpriteMaterial({depthTest: false, transparent: true}));
+      label.renderOrder = 1;
+      this.scene.add(m, label);
+      this.markers.push({m, label});
     }
-    this.markers.forEach((m, k) => {
-      m.visible = k < locations.length;
-      if (m.visible) m.position.set(locations[k].x, locations[k].y, locations[k].z);
+    const shown = new Set();
+    this.marks = contacts.map((c, k) => {
+      const rel = this.fmax > 0 ? Math.min(1, c.force / this.fmax) : 1;
+      const scale = 0.35 + 0.65 * Math.sqrt(rel);
+      const {m, label} = this.markers[k];
+      m.position.set(c.x, c.y, c.z);
+      m.scale.setScalar(scale);
+      const rgb = [0, 0, 0];
+      colourOf(0.25 + 0.75 * rel, rgb, 0);
+      m.material.color.setRGB(rgb[0], rgb[1], rgb[2]);
+      label.visible = c.id != null;
+      if (label.visible) {
+        shown.add(c.id);
+        label.material.map = this.label(c.id);
+        label.material.needsUpdate = true;
+        const h = 2.2 * this.markerSize;
+        label.scale.set(2 * h, h, 1);
+        label.position.set(c.x, c.y, c.z + 1.6 * h);
+      }
+      return {id: c.id, force: c.force, scale, colour: rgb.map((v) => Math.round(v * 255))};
     });
+    this.markers.forEach(({m, label}, k) => {
+      m.visible = k < contacts.length;
+      if (!m.visible) label.visible = false;
+    });
+    for (const [id, texture] of this.labels) if (!shown.has(id)) {
+      texture.dispose();
+      this.labels.delete(id);
+    }
     this.needsRender = true;
+  }
+
+  // "#<id>" on a transparent canvas, made once per contact id while it is shown
+  label(id) {
+    let texture = this.labels.get(id);
+    if (!texture) {
+      const canvas = document.createElement("canvas");
+      canvas.width = 128;
+      canvas.height = 64;
+      const g = canvas.getContext("2d");
+      g.font = "bold 44px sans-serif";
+      g.textAlign = "center";
+      g.textBaseline = "middle";
+      g.lineWidth = 8;
+      g.strokeStyle = "#ffffff";
+      g.strokeText(`#${id}`, 64, 34);
+      g.fillStyle = "#111111";
+      g.fillText(`#${id}`, 64, 34);
+      texture = new THREE.CanvasTexture(canvas);
+      this.labels.set(id, texture);
+    }
+    return texture;
   }
 
   render() {
@@ -229,6 +289,7 @@ export class SkinView {
   }
 
   dispose() {
+    for (const texture of this.labels.values()) texture.dispose();
     this.resize.disconnect();
     this.controls.dispose();
     this.geometry.dispose();
