@@ -124,10 +124,13 @@ def test_contacts_are_drawn_by_force_with_their_ids(barrel):
 
 def test_the_live_page_draws_the_hubs_contacts_with_their_ids(barrel, wait):
     """The scene barrel's press: the page reads contactIds from contactInformation and labels them."""
-    wait(barrel, "window.twin.marks.length > 0 && window.twin.contactIds.every(i => Number.isInteger(i))",
-         timeout=15_000)
-    st = barrel.evaluate("({ids: window.twin.contactIds, marks: window.twin.marks,"
-                         " title: document.getElementById('contacts').title})")
+    # one snapshot, taken when the condition holds (the press may be released a moment later)
+    st = wait(barrel, "(() => { const t = window.twin;"
+                      " if (!(t.marks.length > 0 && t.contactIds.length > 0"
+                      "       && t.contactIds.every(i => Number.isInteger(i)))) return false;"
+                      " return {ids: [...t.contactIds], marks: t.marks.map(m => ({...m})),"
+                      "         title: document.getElementById('contacts').title}; })()",
+              timeout=15_000).json_value()
     assert [m["id"] for m in st["marks"]] == st["ids"] and all(i >= 1 for i in st["ids"])
     assert st["title"].startswith(f"#{st['ids'][0]}: ")
 
