@@ -16,7 +16,8 @@ import typer
 
 __all__ = ["app", "bench"]
 
-app = typer.Typer(help="Performance and accuracy reports (written to docs/benchmarks.md).")
+app = typer.Typer(help="Performance and accuracy reports (written to docs/benchmarks.md).",
+                  rich_markup_mode=None)
 
 
 def _benchmarks_dir() -> Path | None:

@@ -20,7 +20,7 @@ from typing import Any
 import typer
 
 app = typer.Typer(help="Manage the devices of a running hub (list, add, remove, restart, health).",
-                  no_args_is_help=True)
+                  no_args_is_help=True, rich_markup_mode=None)
 
 DEFAULT_URL = "http://127.0.0.1:8080"
 
@@ -102,9 +102,13 @@ def list_devices(url: str = UrlOption, token: str = TokenOption,
     if as_json:
         typer.echo(json.dumps(rows, indent=2))
         return
-    typer.echo("id\tfamily\tstate\tframes\trestarts\treason")
-    for r in rows:
-        typer.echo(f"{r['id']}\t{r['family']}\t{r['state']}\t{r['frames']}\t{r['restarts']}\t{r['reason']}")
+    from ._table import Column, render
+
+    columns = [Column("id", "id"), Column("family", "family", drop=2), Column("state", "state"),
+               Column("frames", "frames", drop=1, align=">"),
+               Column("restarts", "restarts", drop=3, align=">"),
+               Column("reason", "reason", wrap=True), Column("TD", "td", drop=4)]
+    typer.echo("\n".join(render(columns, rows)))
 
 
 @app.command()
