@@ -139,7 +139,8 @@ def test_history_audit_says_why_it_is_empty_and_lists_a_write(cli, demo, eventua
     since = str(time.time())
     res = cli("history", "audit", "--database", demo.database, "--from", since, "--who", "nobody")
     assert res.returncode == 0 and res.stdout == ""
-    assert res.stderr.startswith(f"no audited request by 'nobody' since {since} in {demo.database}: the trail "
+    assert res.stderr.startswith(f"no audited request by 'nobody' since {since} in {demo.database}: "
+                                 "the trail "
                                  "holds writes, actions and refused credentials; reads")
     res = cli("devices", "restart", "taxel-1", env=_env(demo))
     assert res.returncode == 0, res.stderr
@@ -164,7 +165,7 @@ def test_td_validate_a_served_td_by_url_and_from_stdin(cli, demo):
 def test_discover_at_80_columns_keeps_whole_urls(cli, demo):
     res = cli("discover", "--interface", "127.0.0.1", "--timeout", "4", timeout=120)
     assert res.returncode == 0, res.stderr
-    for url in (demo.devices[d] for d in DEMO):  # announced by the demo on loopback; other hubs may be there too
+    for url in (demo.devices[d] for d in DEMO):  # the demo's (other hubs may announce on loopback too)
         assert re.search(rf"^\S+\s+{re.escape(url)}(\s|$)", res.stdout, re.M), res.stdout
 
 

@@ -44,7 +44,8 @@ def test_tokens_create_into_a_folder_that_cannot_be(cli, one_error_line, tmp_pat
 
 
 def test_history_export_onto_a_full_disk(cli, one_error_line, db):
-    line = one_error_line(cli("history", "export", "--device", "d", "--database", db, "--output", "/dev/full"), 1)
+    res = cli("history", "export", "--device", "d", "--database", db, "--output", "/dev/full")
+    line = one_error_line(res, 1)
     assert line == "error: --output '/dev/full': No space left on device; the file is incomplete"
 
 
@@ -71,7 +72,8 @@ def test_tls_selfsigned_keeps_an_existing_pair_unless_forced(cli, one_error_line
     assert res.returncode == 0, res.stderr
     key = (tmp_path / "key.pem").read_bytes()
     line = one_error_line(cli("tls", "selfsigned", "--out", str(tmp_path)), 4)
-    assert line == f"error: {tmp_path} has cert.pem and key.pem already: keep them, or replace them with --force"
+    assert line == (f"error: {tmp_path} has cert.pem and key.pem already: keep them, or replace them "
+                    "with --force")
     assert (tmp_path / "key.pem").read_bytes() == key
     res = cli("tls", "selfsigned", "--out", str(tmp_path), "--force")
     assert res.returncode == 0, res.stderr

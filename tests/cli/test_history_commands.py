@@ -80,8 +80,9 @@ class _Terminal:
 def test_export_draws_a_bar_on_a_terminal_only(db, tmp_path, cli):
     term = _Terminal()
     out = tmp_path / "out.jsonl"
-    proc = subprocess.Popen([WOTT_HUB, "history", "export", "--device", "d", "--database", db, "-o", str(out)],
-                            stderr=term.slave, stdout=subprocess.DEVNULL, env={**os.environ, "COLUMNS": "80"})
+    args = ["history", "export", "--device", "d", "--database", db, "-o", str(out)]
+    proc = subprocess.Popen([WOTT_HUB, *args], stderr=term.slave, stdout=subprocess.DEVNULL,
+                            env={**os.environ, "COLUMNS": "80"})
     term.start()
     assert proc.wait(120) == 0
     shown = term.close()
@@ -99,8 +100,8 @@ def test_export_draws_a_bar_on_a_terminal_only(db, tmp_path, cli):
 
 
 def _start_replay(db: str, stderr) -> tuple[subprocess.Popen[str], dict]:
-    proc = subprocess.Popen([WOTT_HUB, "replay", "--device", "d", "--database", db, "--port", "0", "--ws-port", "0",
-                             "--json"], stdout=subprocess.PIPE, stderr=stderr, text=True)
+    args = ["replay", "--device", "d", "--database", db, "--port", "0", "--ws-port", "0", "--json"]
+    proc = subprocess.Popen([WOTT_HUB, *args], stdout=subprocess.PIPE, stderr=stderr, text=True)
     assert proc.stdout is not None
     line = proc.stdout.readline()
     assert line, proc.poll()
@@ -143,7 +144,8 @@ def test_replay_says_what_it_does_while_it_starts_on_a_terminal(db):
     finally:
         _stop(proc)
     shown = term.close()
-    assert "replay: opening the history database" in shown or "replay: starting the replay server" in shown, shown
+    said = ("replay: opening the history database", "replay: starting the replay server")
+    assert any(s in shown for s in said), shown
     assert "Traceback" not in shown
 
 
