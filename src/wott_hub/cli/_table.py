@@ -69,8 +69,10 @@ def render(columns: Sequence[Column], rows: Sequence[Mapping[str, object]], widt
     wrapping = [c for c in shown if c.wrap]
     if total(shown, widths) > width and wrapping:
         room = width - total([c for c in shown if not c.wrap], widths) - GAP * len(wrapping)
-        for k, c in enumerate(sorted(wrapping, key=lambda c: c.most or width)):
-            share = max(room // (len(wrapping) - k), narrow[c.key])
+        order = sorted(wrapping, key=lambda c: c.most or width)
+        for k, c in enumerate(order):  # an equal share each, leaving the others their narrowest
+            reserve = sum(narrow[r.key] for r in order[k + 1:])
+            share = max(narrow[c.key], min(room // (len(order) - k), room - reserve))
             widths[c.key] = min(widths[c.key], share, max(c.most, narrow[c.key]) if c.most else share)
             room -= widths[c.key]
     out = [title] if title else []

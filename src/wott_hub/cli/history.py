@@ -58,12 +58,14 @@ def list_history(database: str = _DB, config: Path = _CFG,
                      "from": _local(first), "to": _local(last),
                      "duration": "-" if first is None or last is None else f"{(last - first) / 1e9:.1f} s",
                      "seq": f"{t.first_seq}..{t.last_seq}" if t.first_seq is not None else "-"})
+    offset = dt.datetime.now().astimezone().strftime("%z")
+    zone = f"UTC{offset[:-2]}:{offset[-2:]}"  # the times are local: their zone, once
     columns = [Column("device", "device"), Column("family", "family", drop=2),
                *([Column("records", "count", drop=1, align=">")] if count else []),
-               Column("from", "from"), Column("to", "to"), Column("duration", "duration", drop=3, align=">"),
+               Column(f"from ({zone})", "from"), Column("to", "to"),
+               Column("duration", "duration", drop=3, align=">"),
                Column("seq", "seq", drop=4)]
-    zone = dt.datetime.now().astimezone().strftime("UTC%z")
-    title = f"history: {describe(reader.engine.url)} (times: local, {zone[:-2]}:{zone[-2:]})"
+    title = f"history: {describe(reader.engine.url)}"
     if not things:
         typer.echo(f"{title}: nothing recorded yet")
         return
