@@ -132,6 +132,18 @@ def list_times(db: Path, runs: int) -> dict[str, float]:
     return out
 
 
+def baseline_times(runs: int) -> dict[str, float]:
+    """What any command costs before it reads a database: Python itself, and ``wott-hub`` parsing a
+    command line (typer, click, pydantic) with ``history list --help``."""
+    def python() -> None:
+        subprocess.run([sys.executable, "-c", "pass"], check=True)
+
+    def helptext() -> None:
+        subprocess.run([_wott_hub(), "history", "list", "--help"], check=True, capture_output=True)
+
+    return {"python_s": _median_s(python, runs), "help_s": _median_s(helptext, runs)}
+
+
 def replay_times(db: Path, runs: int) -> dict[str, float]:
     import httpx
 
@@ -199,10 +211,16 @@ def main() -> None:
             rows.append(["24 h, 3 devices x 120 Hz", f"{3 * m:,}", f"{day.stat().st_size / 1e9:.1f} GB",
                          f"{dt['command_s']:.2f}", f"{dt['query_s'] * 1000:.1f}",
                          f"{dt['count_query_s']:.2f}", "2"])
+        base = baseline_times(args.runs)
         rt = replay_times(hour, args.runs)
         rate = export_rate(hour, n)
     body = markdown_table(["database", "records", "size", "`history list` (command), s",
                            "listing query, ms", "`--count` query, s", "target, s"], rows)
+    body += ("\n\nFor comparison, the same machine at the same time: "
+             f"`python -c pass` {base['python_s']:.2f} s, "
+             f"`wott-hub history list --help` (Python, typer and its pydantic, no database) "
+             f"{base['help_s']:.2f} s: the command's time beyond these is SQLAlchemy's import and the "
+             "query.")
     body += (f"\n\n`replay --device dev-0` of the hour: its `--json` line {rt['line_s']:.2f} s and the first "
              "record "
              f"at an SSE client (`Last-Event-ID: 0`) {rt['first_record_s']:.2f} s after the command started "
