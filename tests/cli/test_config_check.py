@@ -225,3 +225,41 @@ def test_without_a_config_the_demo_fleet_is_checked(cli):
     res = cli("config", "check")
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "the demo fleet: 3 device(s): OK"
+
+
+def test_run_serves_the_others_and_counts_a_device_that_does_not_open(tmp_path):
+    """A device whose settings are right but which does not open (its model file is not there) does not
+    stop the hub: the banner lists it FAILED and counts it; ``config check --open`` finds it first."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    quiet = ("[hub]\nhttp_port = 0\nws_port = 0\nhistory = false\n\n[directory]\nenabled = false\n\n"
+             "[discovery]\nmdns = false\nbrowse = false\n\n")
+    path = _write(tmp_path, quiet + GOOD.split("\n", 3)[3]
+                  + '\n[[device]]\nid = "arm"\nfamily = "barrel-vision"\nmodel = "missing.onnx"\n')
+    exe = str(Path(sys.executable).with_name("wott-hub"))
+    check = subprocess.run([exe, "config", "check", "--config", str(path), "--open"], capture_output=True,
+                           text=True, timeout=180)
+    assert check.returncode == 5 and "missing.onnx" in check.stderr, check.stderr
+    log = (tmp_path / "hub.log").open("w")
+    proc = subprocess.Popen([exe, "run", "--config", str(path)], stdout=subprocess.PIPE, stderr=log,
+                            text=True, env={**os.environ, "COLUMNS": "80"}, cwd=tmp_path)
+    try:
+        assert proc.stdout is not None
+        lines = []
+        for line in proc.stdout:
+            lines.append(line.rstrip("\n"))
+            if line.startswith("ready in "):
+                break
+        assert "  devices: 2 serving, 1 FAILED (retried)" in lines, lines
+        failed = [line for line in lines if "FAILED:" in line]
+        assert len(failed) == 1 and failed[0].split()[0] == "arm" and "missing.onnx" in failed[0]
+        served = [line.split()[0] for line in lines if re.match(r"^    \S+ +\S+ +http://", line)]
+        assert sorted(served) == ["finger", "pad"]
+    finally:
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(60) == 0
+        log.close()

@@ -4,6 +4,7 @@ prose wraps at spaces, then columns go by priority, then rows become blocks."""
 from __future__ import annotations
 
 import importlib
+import json
 
 import pytest
 
@@ -71,3 +72,17 @@ def test_no_value_is_ever_cut_at_any_width(width):
     for row in _rows():
         assert row["id"] in text and TIME in text
         assert URL in text or "URL" in text.splitlines()[-1]  # whole, or named as not shown
+
+
+def test_tokens_list_at_80_columns_keeps_names_and_ids_whole(cli, tmp_path):
+    file = tmp_path / ("a-rather-long-folder-name-" * 3) / "tokens.json"
+    tokens = (("dashboard-of-the-ward-3-night-shift", "read"), ("robot-cell-controller", "control"))
+    for name, scope in tokens:
+        assert cli("tokens", "create", name, "--scope", scope, "--file", str(file)).returncode == 0
+    res = cli("tokens", "list", "--file", str(file))
+    assert res.returncode == 0, res.stderr
+    listed = {t["name"]: t
+              for t in json.loads(cli("tokens", "list", "--file", str(file), "--json").stdout)}
+    assert all(len(line) <= 80 for line in res.stdout.splitlines())
+    for name, t in listed.items():
+        assert f"{name}  " in res.stdout and t["id"] in res.stdout and t["where"] == str(file)
