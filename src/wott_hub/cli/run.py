@@ -80,6 +80,8 @@ def run(
     check_port(port, "--port"), check_port(ws_port, "--ws-port")  # 70000 would wrap to 4464
     if config is not None:
         cfg, _, problems = load_checked(config)
+        if cfg.demo:  # no [[device]]: the plugins' demo devices, whose mistakes mark them, not the hub
+            problems = check_files(cfg)
         if problems:
             raise ConfigError("\n".join(problems))
     else:
