@@ -65,3 +65,12 @@ def test_every_listing_command_has_json():
                ("config", "check")]
     for path in listing:
         assert "--json" in _help(path), path
+
+
+@pytest.mark.parametrize(("path", "cmd"), [(p, c) for p, c in COMMANDS if getattr(c, "commands", None)],
+                         ids=[" ".join(p) or "wott-hub" for p, c in COMMANDS if getattr(c, "commands", None)])
+def test_a_groups_list_of_commands_cuts_no_summary(path, cmd):
+    out = _help(path)
+    listed = out.split("\nCommands:\n", 1)[1].splitlines()
+    assert len([line for line in listed if line.strip()]) == len(cmd.commands)
+    assert not [line for line in listed if line.rstrip().endswith("...")], out

@@ -47,7 +47,7 @@ def load_checked(config: Path | None) -> tuple[HubConfig, list[DeviceCheck], lis
     return cfg, devices, problems
 
 
-@app.command()
+@app.command(short_help="Every problem of a config; nothing is started.")
 def check(
     config: Path = typer.Option(None, "--config", "-c", dir_okay=False,
                                 help="Hub config (TOML). Without it: the demo fleet."),

@@ -53,7 +53,7 @@ async def browse(seconds: float, interfaces: list[str] | None, fetch: bool) -> l
     return rows
 
 
-@app.command()
+@app.command(short_help="WoT Things and directories announced by mDNS.")
 def discover(
     timeout: float = typer.Option(3.0, help="Seconds to listen for announcements."),
     interface: list[str] = typer.Option(None, help="Only this interface address (repeatable), "

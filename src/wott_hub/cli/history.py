@@ -23,7 +23,8 @@ if TYPE_CHECKING:
 __all__ = ["app"]
 
 app = typer.Typer(help="Recorded events: list devices and time ranges, export them, read the audit trail.",
-                  no_args_is_help=True, rich_markup_mode=None)
+                  short_help="Recorded events: list, export, audit trail.", no_args_is_help=True,
+                  rich_markup_mode=None)
 
 _DB = typer.Option(None, "--database", "-d", help="Database file or URL (default: the config's, "
                    "else ./wott-hub.db).")
@@ -32,7 +33,7 @@ _CFG = typer.Option(None, "--config", "-c", exists=True, dir_okay=False,
 _PROGRESS = typer.Option(True, "--progress/--no-progress", help="A progress bar on stderr (a terminal only).")
 
 
-@app.command("list")
+@app.command("list", short_help="Recorded devices: time range, seq range.")
 def list_history(database: str = _DB, config: Path = _CFG,
                  count: bool = typer.Option(False, "--count", help="Also count each device's records "
                                             "exactly (reads its whole index: ~0.1 s per million)."),
@@ -72,7 +73,7 @@ def list_history(database: str = _DB, config: Path = _CFG,
     typer.echo("\n".join(render(columns, rows, title=title)))
 
 
-@app.command()
+@app.command(short_help="A time range as JSON Lines or MCAP.")
 def export(
     device: list[str] = typer.Option(..., "--device", help="Device id (see wott-hub history list); "
                                      "repeatable: MCAP puts several devices on one time base."),
@@ -162,7 +163,7 @@ def _jsonl(reader: HistoryReader, out: Any, devices: list[str], lo: int | None, 
     return sum(export_jsonl(reader, out, d, t_from_ns=lo, t_to_ns=hi, names=names or None) for d in devices)
 
 
-@app.command()
+@app.command(short_help="The audit trail: writes, actions, refusals.")
 def audit(
     t_from: str = typer.Option(None, "--from", help="Start: ISO 8601 (local unless Z), -10m, seconds."),
     who: str = typer.Option(None, "--who", help="Only this token's name ('-': no valid token)."),

@@ -17,7 +17,7 @@ app = typer.Typer(help="Installed driver plugins and the device families they pr
                   rich_markup_mode=None)
 
 
-@app.command("list")
+@app.command("list", short_help="Every driver plugin, and why one failed.")
 def list_plugins(
     as_json: bool = typer.Option(False, "--json", help="Print JSON (a list of plugins) for scripts."),
 ) -> None:
@@ -48,7 +48,7 @@ def list_plugins(
         typer.echo(f"{len(failed)} plugin(s) with errors: {', '.join(failed)}", err=True)
 
 
-@app.command()
+@app.command(short_help="Device families, or one family's settings.")
 def families(
     name: str = typer.Argument(None, help="One family: its settings. Omit to list the families."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON (families with their settings schema)."),

@@ -22,7 +22,7 @@ __all__ = ["app", "replay"]
 app = typer.Typer(rich_markup_mode=None)
 
 
-@app.command()
+@app.command(short_help="Re-emit recorded devices as live replay Things.")
 def replay(
     device: list[str] = typer.Option(..., "--device", help="Recorded device id (see wott-hub history "
                                      "list); repeatable: the devices replay together on one time base."),

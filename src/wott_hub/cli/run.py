@@ -39,7 +39,7 @@ class LogLevel(StrEnum):
     critical = "critical"
 
 
-@app.command()
+@app.command(short_help="Run the hub (no config: the demo fleet).")
 def run(
     config: Path = typer.Option(None, "--config", "-c", exists=True, dir_okay=False,
                                 help="Hub config (TOML, see docs/hub.md). Without it: the demo scene."),

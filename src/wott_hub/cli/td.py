@@ -37,7 +37,7 @@ def show(
     typer.echo(json.dumps(out, indent=2))
 
 
-@app.command()
+@app.command(short_help="Check a TD (a file, a URL or -) against TD 1.1 and Tactile.")
 def validate(
     source: str = typer.Argument(..., help="A TD: a JSON file, an http(s) URL (a served TD), or - for "
                                            "standard input."),

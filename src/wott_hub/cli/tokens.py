@@ -18,7 +18,8 @@ if TYPE_CHECKING:
 __all__ = ["app", "tls_app"]
 
 app = typer.Typer(help="Bearer tokens with a scope (read, control, admin) for the hub's clients.",
-                  no_args_is_help=True, rich_markup_mode=None)
+                  short_help="Bearer tokens for the hub's clients.", no_args_is_help=True,
+                  rich_markup_mode=None)
 tls_app = typer.Typer(help="TLS certificates for https/wss.", no_args_is_help=True, rich_markup_mode=None)
 
 _FILE = typer.Option(None, "--file", "-f", dir_okay=False,
@@ -76,7 +77,7 @@ def list_(file: Path = _FILE, config: Path = _CONFIG,
     typer.echo("\n".join(render(columns, rows)))
 
 
-@app.command()
+@app.command(short_help="Remove a token from the token file.")
 def revoke(name: str = typer.Argument(..., help="The token's name."), file: Path = _FILE,
            config: Path = _CONFIG) -> None:
     """Remove a token from the token file: a running hub refuses it within a second."""
@@ -127,7 +128,7 @@ def _tokens(file: Path | None, config: Path | None) -> list[tuple[str, StoredTok
     return out
 
 
-@tls_app.command()
+@tls_app.command(short_help="Write a self-signed cert.pem and key.pem.")
 def selfsigned(out: Path = typer.Option(..., "--out", "-o", file_okay=False, help="Directory for the pair."),
                host: list[str] = typer.Option(["localhost", "127.0.0.1"], "--host",
                                               help="Names and addresses the certificate is valid for."),
