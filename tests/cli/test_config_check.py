@@ -263,3 +263,10 @@ def test_run_serves_the_others_and_counts_a_device_that_does_not_open(tmp_path):
         proc.send_signal(signal.SIGINT)
         assert proc.wait(60) == 0
         log.close()
+
+
+def test_a_database_url_of_no_known_scheme_is_a_config_error(cli, tmp_path):
+    path = _write(tmp_path, "[hub]\ndatabase = 'nosuchdb://host/x'\n")
+    errors = _errors(res := cli("config", "check", "--config", str(path)))
+    assert res.returncode == 2 and len(errors) == 1, res.stderr
+    assert errors[0].startswith(f"{path}: [hub].database: cannot use the history database 'nosuchdb://host/x'")

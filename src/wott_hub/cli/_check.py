@@ -174,9 +174,18 @@ def _bounds(prop: Mapping[str, Any]) -> str:
 
 
 def check_files(cfg: HubConfig) -> list[str]:
-    """The files ``[security]`` names, read as the hub will read them: the token file, the TLS pair."""
+    """What the config names outside itself, read as the hub will read it: the history database's URL
+    (its scheme and driver; a file path needs nothing), the token file, the TLS pair."""
     sec = cfg.security
     out = []
+    if cfg.history and "://" in cfg.database:
+        from wott_hub.errors import HistoryError
+        from wott_hub.history.db import create_engine, database_url
+
+        try:
+            create_engine(database_url(cfg.database)).dispose()  # no connection is made
+        except HistoryError as e:
+            out.append(f"{cfg.source}: [hub].database: {e}")
     if sec.tokens_file:
         from wott_hub.security.tokens import TokenFile
 

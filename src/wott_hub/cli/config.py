@@ -5,7 +5,8 @@ Why a command of its own: a hub takes many seconds to start, and one that starts
 misspelt setting marks the device failed and keeps running; a person fixing a config wants
 every mistake listed, each with its file, table and key, before anything starts. Exit
 codes by class (``wott_hub.errors.EXIT_CODES``): 0 all good; 2 a config error (a table, a
-key, a value, a device's settings, a file ``[security]`` names); 5 a device that does not
+key, a value, a device's settings, the database URL's scheme, a file ``[security]`` names); 5 a
+device that does not
 open (``--open`` only: the settings are right, the device is not there).
 """
 
@@ -59,7 +60,8 @@ def check(
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON for scripts."),
 ) -> None:
     """Read the config as 'wott-hub run' would and list every problem: tables, keys, values, each
-    device's family and settings, the [security] files; exit 0 when the hub would start.
+    device's family and settings, the database URL, the [security] files; exit 0 when the hub
+    would start.
 
     Exit codes: 2 a config error, 5 a device that does not open (--open).
     """
