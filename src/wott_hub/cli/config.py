@@ -5,9 +5,9 @@ Why a command of its own: a hub takes many seconds to start, and one that starts
 misspelt setting marks the device failed and keeps running; a person fixing a config wants
 every mistake listed, each with its file, table and key, before anything starts. Exit
 codes by class (``wott_hub.errors.EXIT_CODES``): 0 all good; 2 a config error (a table, a
-key, a value, a device's settings, the database URL's scheme, a file ``[security]`` names); 5 a
-device that does not
-open (``--open`` only: the settings are right, the device is not there).
+key, a value, a device's settings, the database URL's scheme, a file ``[security]`` names);
+5 a device that does not open (``--open`` only: the settings are right, the device is not
+there).
 """
 
 from __future__ import annotations
