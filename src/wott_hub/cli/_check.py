@@ -1,6 +1,7 @@
 """What ``wott-hub config check`` and ``wott-hub run`` check beyond the tables themselves: each
-device's settings against its family, the files ``[security]`` names, and (``--open``) each
-device opened and closed through its plugin without serving it.
+device's settings against its family, the database URL and the files ``[security]`` names, and
+(``--open``) each device opened through its plugin, its first frame read, and closed, without
+serving it.
 
 Why here and not when the hub starts: a hub started with a device whose settings are wrong
 marks that device failed and keeps serving the others (a plugin's failure marks its device,
