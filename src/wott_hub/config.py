@@ -16,7 +16,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from wott_hub.configspec import ConfigError, Flag, check, doc, json_schema, read, says, table_of
+from wott_hub.configspec import (
+    ConfigError,
+    Flag,
+    check,
+    doc,
+    json_schema,
+    problems,
+    read,
+    says,
+    suggest,
+    table_of,
+)
 from wott_hub.mqtt.config import MQTT_TABLE, MqttConfig, parse_mqtt
 from wott_hub.network.config import (
     DIRECTORY_TABLE,
@@ -31,10 +42,14 @@ from wott_hub.security.config import SECURITY_TABLE, SecurityConfig, parse_secur
 if TYPE_CHECKING:
     from wott_hub.history.retention import Retention
 
-__all__ = ["HUB_TABLE", "MAX_WORKERS", "ConfigError", "HubConfig", "check_port", "config_schema"]
+__all__ = ["DEMO_RETENTION_MB", "HUB_TABLE", "MAX_WORKERS", "ConfigError", "HubConfig", "check_port",
+           "config_schema"]
 
 MAX_WORKERS = 64
 """Worker processes at most: beyond a few per core they only add memory and context switches."""
+
+DEMO_RETENTION_MB = 500.0
+"""The demo's history bound (``wott-hub run`` without a config): about five hours of the demo fleet."""
 
 Text = Annotated[str, says("a non-empty string", pattern=r"\S")]
 Port = Annotated[int, says("a port number (0: any free port)", ge=0, le=65535)]
@@ -114,7 +129,10 @@ class HubConfig:
 
     @classmethod
     def demo_config(cls, **overrides: Any) -> HubConfig:
-        overrides.setdefault("discovery", DiscoveryConfig())  # the demo announces (on its host only)
+        """The demo: the demo fleet, announced on its host only, its history kept under
+        ``DEMO_RETENTION_MB`` (a demo left running grows its database ~95 MB an hour)."""
+        overrides.setdefault("discovery", DiscoveryConfig())
+        overrides.setdefault("retention_mb", DEMO_RETENTION_MB)
         return cls(demo=True, source="<demo>", **overrides)
 
     @classmethod
@@ -134,39 +152,44 @@ class HubConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<config>") -> HubConfig:
-        unknown = set(data) - {"hub", "device", "directory", "discovery", "mqtt", "security"}
-        if unknown:
-            raise ConfigError(f"{source}: unknown table(s) {sorted(unknown)}; expected [hub], [[device]], "
-                              "[directory], [discovery], [mqtt] and [security]")
+        """The config of a TOML document; a ``ConfigError`` of one line per problem found in any
+        table or device (all of them: ``configspec.problems``), never only the first."""
+        errors: list[str] = []
+        unknown = sorted(set(data) - set(_TABLES))
+        for name in unknown:
+            hint = suggest(name, ("device",), "[[{}]]") or suggest(name, _FILE_TABLES, "[{}]") or (
+                "; expected [hub], [[device]], [directory], [discovery], [mqtt] and [security]")
+            errors.append(f"{source}: unknown table [{name}]{hint}")
         hub = data.get("hub", {})
         if isinstance(hub, dict) and hub.get("ws_port") is False:  # documented spelling of "off"
             hub = {**hub, "ws_port": None}
-        table = read(HUB_TABLE, hub, f"{source}: [hub]")
-        values = {k: getattr(table, k) for k in hub if k in HUB_TABLE.__struct_fields__}
+        values: dict[str, Any] = {}
+        if found := problems(HUB_TABLE, hub, f"{source}: [hub]"):
+            errors += found
+        else:
+            table = read(HUB_TABLE, hub, f"{source}: [hub]")
+            values = {k: getattr(table, k) for k in hub if k in HUB_TABLE.__struct_fields__}
         devices = data.get("device", [])
-        if not isinstance(devices, list):
-            raise ConfigError(f"{source}: 'device' must be an array of tables ([[device]])")
-        from wott_hub.plugins import DeviceConfig
-
-        parsed = []
-        ids: set[str] = set()
-        for i, dev in enumerate(devices):
-            where = f"{source}: device[{i}]"
-            cfg = DeviceConfig.from_table(dev, where=where)  # a SettingsError: a ConfigError too
-            if cfg.id in ids:
-                raise ConfigError(f"{where}.id: {cfg.id!r} is used by another device")
-            if cfg.id == "hub":
-                raise ConfigError(f"{where}.id: 'hub' is the hub's own Thing; choose another id")
-            ids.add(cfg.id)
-            parsed.append(cfg)
+        parsed = _devices(devices, source, errors)
+        ids = {d.id for d in parsed}
         skip = set(values.get("history_skip", ()))
-        if skip - ids:
-            raise ConfigError(f"{source}: [hub].history_skip names unknown device(s) {sorted(skip - ids)}")
-        return cls(devices=tuple(parsed), demo=not parsed, source=source,
-                   directory=parse_directory(data.get("directory", {}), source),
-                   discovery=parse_discovery(data.get("discovery", {}), source),
-                   mqtt=parse_mqtt(data.get("mqtt", {}), source),
-                   security=parse_security(data.get("security", {}), source), **values)
+        if skip - ids and isinstance(devices, list) and len(parsed) == len(devices):  # else: said already
+            errors.append(f"{source}: [hub].history_skip names unknown device(s) {sorted(skip - ids)}")
+        tables: dict[str, Any] = {}
+        for key, (model, parse) in _TABLES.items():
+            if model is None:
+                continue
+            given = data.get(key, {})
+            if found := problems(model, given, f"{source}: [{key}]"):
+                errors += found
+                continue
+            try:
+                tables[key] = parse(given, source)  # rules across keys (cert and key go together...)
+            except ConfigError as e:
+                errors.append(str(e))
+        if errors:
+            raise ConfigError("\n".join(errors))
+        return cls(devices=tuple(parsed), demo=not parsed, source=source, **tables, **values)
 
     @property
     def retention(self) -> Retention:
@@ -178,6 +201,39 @@ class HubConfig:
 HUB_TABLE = table_of(HubConfig, "hub", exclude=("devices", "directory", "discovery", "mqtt", "security",
                                                 "demo", "source"))
 """The ``[hub]`` table as it is written in a file (JSON Schema: ``config_schema``)."""
+
+_FILE_TABLES = ("hub", "directory", "discovery", "mqtt", "security")
+_TABLES: dict[str, tuple[Any, Any]] = {  # a file's tables: their declared model and their parser
+    "hub": (None, None), "device": (None, None),
+    "directory": (DIRECTORY_TABLE, parse_directory), "discovery": (DISCOVERY_TABLE, parse_discovery),
+    "mqtt": (MQTT_TABLE, parse_mqtt), "security": (SECURITY_TABLE, parse_security),
+}
+
+
+def _devices(tables: Any, source: str, errors: list[str]) -> list[Any]:
+    """The ``[[device]]`` tables as ``DeviceConfig``s; each problem (every one) appended to ``errors``.
+    The family's settings are not checked here (that needs the plugins: ``wott-hub config check``)."""
+    if not isinstance(tables, list):
+        errors.append(f"{source}: 'device' must be an array of tables ([[device]])")
+        return []
+    from wott_hub.plugins import DeviceConfig
+    from wott_hub.plugins.model import DeviceTable
+
+    parsed = []
+    ids: set[str] = set()
+    for i, dev in enumerate(tables):
+        where = f"{source}: device[{i}]"
+        if found := problems(DeviceTable, dev, where):
+            errors += found
+            continue
+        cfg = DeviceConfig.from_table(dev, where=where)
+        if cfg.id in ids:
+            errors.append(f"{where}.id: {cfg.id!r} is used by another device")
+        elif cfg.id == "hub":
+            errors.append(f"{where}.id: 'hub' is the hub's own Thing; choose another id")
+        ids.add(cfg.id)
+        parsed.append(cfg)
+    return parsed
 
 
 def _replace(cfg: HubConfig, **changes: Any) -> HubConfig:

@@ -53,7 +53,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=60)
 
 
-@pytest.mark.parametrize("args", [("history", "export", "--device", "d"), ("history", "list")])
+@pytest.mark.parametrize("args", [("history", "export", "--device", "d"), ("history", "list", "--check")])
 def test_the_cli_says_corrupted_in_one_line_and_exits_non_zero(corrupted, args):
     res = _cli(*args, "--database", corrupted)
     assert res.returncode == 6, res.stderr

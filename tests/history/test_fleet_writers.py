@@ -92,7 +92,7 @@ def test_two_hubs_write_one_database_concurrently_and_lose_nothing(database, eng
     assert Lease(engine, hub_id="hub-a").holder() is None and Lease(engine, hub_id="hub-b").holder() is None
     # the history command reads the shared database by its URL (or file)
     wott_hub = str(Path(sys.executable).parent / "wott-hub")
-    listing = subprocess.run([wott_hub, "history", "list", "--database", database, "--json"],
+    listing = subprocess.run([wott_hub, "history", "list", "--database", database, "--json", "--count"],
                              capture_output=True, text=True, timeout=60)
     assert listing.returncode == 0, listing.stderr
     assert {t["id"]: t["count"] for t in json.loads(listing.stdout)} == {

@@ -33,7 +33,7 @@ def test_no_devices_means_the_demo():
     ({"hub": {"http_port": 70000}}, "[hub].http_port: a port number"),
     ({"hub": {"retention_days": -1}}, "[hub].retention_days: a positive number"),
     ({"hub": {"history": "yes"}}, "[hub].history: true or false"),
-    ({"hubs": {}}, "unknown table(s) ['hubs']"),
+    ({"hubs": {}}, "unknown table [hubs]; did you mean [hub]?"),
     ({"device": [{"id": "a", "family": "scene"}, {"id": "a", "family": "scene"}]}, "device[1].id"),
     ({"device": [{"family": "scene"}]}, "device[0].id: required"),
     ({"device": [{"id": "hub", "family": "scene"}]}, "'hub' is the hub's own Thing"),

@@ -128,7 +128,7 @@ def test_history_and_replay_commands(config_file, tmp_path, read_sse, sse_events
         proc.send_signal(signal.SIGINT)
         assert proc.wait(30) == 0
     db = str(tmp_path / "hub.db")
-    listing = subprocess.run([WOTT_HUB, "history", "list", "--database", db, "--json"],
+    listing = subprocess.run([WOTT_HUB, "history", "list", "--database", db, "--json", "--count"],
                              capture_output=True, text=True, check=True)
     (pad,) = json.loads(listing.stdout)
     assert pad["id"] == "pad" and pad["family"] == "scene" and pad["count"] >= 200

@@ -181,7 +181,7 @@ def test_cli_validate_rejects_non_json(tmp_path):
     f = tmp_path / "x.json"
     f.write_text("{nope")
     res = runner.invoke(app, ["td", "validate", str(f)])
-    assert res.exit_code == 1 and "not JSON" in res.output
+    assert res.exit_code == 2 and "not JSON" in res.output  # bad input (InvalidInput), not a TD with problems
 
 
 def test_cli_show_values_includes_mesh():

@@ -3,7 +3,8 @@ default) and how a ``--from``/``--to`` range is read.
 
 Contract: the history commands only *read*: ``open_reader`` never creates a
 file, never migrates, and refuses (``HistoryError``) a missing, empty, foreign,
-newer or corrupted database. Their errors are ``WottHubError``s, which end the
+newer or (when it checks the whole file) corrupted database; a page found corrupted
+by any read is a ``HistoryError`` too. Their errors are ``WottHubError``s, which end the
 command with one line and an exit code (``wott_hub.cli``, one place for every command).
 """
 
@@ -30,12 +31,14 @@ def resolve_database(database: str | None, config: Path | None) -> str:
     return HubConfig().database
 
 
-def open_reader(database: str) -> HistoryReader:
-    """A HistoryReader on an existing history database (never creates or migrates one)."""
+def open_reader(database: str, *, integrity: bool = True) -> HistoryReader:
+    """A HistoryReader on an existing history database (never creates or migrates one);
+    ``integrity``: every page checked first (a full read of the file: commands that read a
+    little of it, such as ``history list``, leave it to ``--check``)."""
     from wott_hub.history.db import open_existing
     from wott_hub.history.reader import HistoryReader
 
-    return HistoryReader(open_existing(database))
+    return HistoryReader(open_existing(database, integrity=integrity))
 
 
 def time_range(t_from: str | None, t_to: str | None) -> tuple[int | None, int | None]:

@@ -16,7 +16,8 @@ import typer
 
 __all__ = ["app", "bench"]
 
-app = typer.Typer(help="Performance and accuracy reports (written to docs/benchmarks.md).")
+app = typer.Typer(help="Performance and accuracy reports (written to docs/benchmarks.md).",
+                  rich_markup_mode=None)
 
 
 def _benchmarks_dir() -> Path | None:
@@ -33,7 +34,8 @@ def _available(folder: Path) -> dict[str, Path]:
     return dict(sorted(found.items()))
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+@app.command(short_help="Run a benchmark (no NAME: list them).",
+             context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
 def bench(ctx: typer.Context,
           name: str | None = typer.Argument(None, help="Benchmark name; omit to list.")) -> None:
     """Run benchmarks/bench_NAME.py or the package benchmarks/bench_NAME/ (extra arguments are passed on)."""

@@ -20,7 +20,8 @@ from typing import Any
 import typer
 
 app = typer.Typer(help="Manage the devices of a running hub (list, add, remove, restart, health).",
-                  no_args_is_help=True)
+                  short_help="Manage the devices of a running hub.", no_args_is_help=True,
+                  rich_markup_mode=None)
 
 DEFAULT_URL = "http://127.0.0.1:8080"
 
@@ -81,7 +82,7 @@ def _tables(text: str, source: str, only: str | None) -> list[dict[str, Any]]:
     return tables
 
 
-@app.command("list")
+@app.command("list", short_help="The hub's devices, their state and counters.")
 def list_devices(url: str = UrlOption, token: str = TokenOption,
                  as_json: bool = typer.Option(False, "--json", help="Print the rows as JSON.")) -> None:
     """The hub's devices: id, family, state, frames, restarts, reason (failed ones included)."""
@@ -102,12 +103,16 @@ def list_devices(url: str = UrlOption, token: str = TokenOption,
     if as_json:
         typer.echo(json.dumps(rows, indent=2))
         return
-    typer.echo("id\tfamily\tstate\tframes\trestarts\treason")
-    for r in rows:
-        typer.echo(f"{r['id']}\t{r['family']}\t{r['state']}\t{r['frames']}\t{r['restarts']}\t{r['reason']}")
+    from ._table import Column, render
+
+    columns = [Column("id", "id"), Column("family", "family", drop=2), Column("state", "state"),
+               Column("frames", "frames", drop=1, align=">"),
+               Column("restarts", "restarts", drop=3, align=">"),
+               Column("reason", "reason", wrap=True), Column("TD", "td", drop=4)]
+    typer.echo("\n".join(render(columns, rows)))
 
 
-@app.command()
+@app.command(short_help="Health and counters of the devices, as JSON.")
 def health(device: str = typer.Argument(None, help="One device (default: all)."), url: str = UrlOption,
            token: str = TokenOption) -> None:
     """Health and counters of the devices (frames, frameErrors, restarts, tares, lastTare...), as JSON."""
@@ -149,7 +154,7 @@ def remove(device: str = typer.Argument(..., help="The device's id."), url: str 
     typer.echo(f"removed {device}")
 
 
-@app.command()
+@app.command(short_help="Close a device's driver and open it again.")
 def restart(device: str = typer.Argument(..., help="The device's id."), url: str = UrlOption,
             token: str = TokenOption) -> None:
     """Close a device's driver and open it again; its stream and subscribers stay (restartDevice)."""

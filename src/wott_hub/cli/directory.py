@@ -13,7 +13,10 @@ from typing import Any
 
 import typer
 
-app = typer.Typer(help="Query a W3C WoT Thing Description Directory.", no_args_is_help=True)
+app = typer.Typer(help="Query a W3C WoT Thing Description Directory.", no_args_is_help=True,
+                  rich_markup_mode=None)
+
+__all__ = ["app"]
 
 DEFAULT_URL = "http://127.0.0.1:8080/"
 
@@ -54,8 +57,10 @@ def _run(coro: Any) -> Any:
 
 @app.command()
 def query(
-    jsonpath: str = typer.Argument(..., help="RFC 9535 JSONPath over the array of all TDs, "
-                                             "e.g. '$[?@.title==\"barrel-1\"]'."),
+    jsonpath: str = typer.Argument(..., help="RFC 9535 JSONPath over the array of all TDs, e.g. "
+                                             "'$[?@.properties.skinShape].title' (the title of "
+                                             "every tactile device) or "
+                                             "'$[?search(@.title, \"[Bb]arrel\")].id'."),
     url: str = UrlOption,
     token: str = TokenOption,
     compact: bool = typer.Option(False, help="One line of JSON instead of indented."),
@@ -74,8 +79,10 @@ def query(
 
 
 @app.command("list")
-def list_things(url: str = UrlOption, token: str = TokenOption) -> None:
-    """List the TDs of the directory: id and title, one per line."""
+def list_things(url: str = UrlOption, token: str = TokenOption,
+                as_json: bool = typer.Option(False, "--json",
+                                             help="Print the TDs' id and title as JSON.")) -> None:
+    """List the TDs of the directory: id and title."""
 
     async def go() -> Any:
         client = await _client(url, token)
@@ -84,5 +91,10 @@ def list_things(url: str = UrlOption, token: str = TokenOption) -> None:
         finally:
             client.close()
 
-    for td in _run(go()):
-        typer.echo(f"{td.get('id', '?')}\t{td.get('title', '')}")
+    rows = [{"id": td.get("id", "?"), "title": td.get("title", "")} for td in _run(go())]
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+        return
+    from ._table import Column, render
+
+    typer.echo("\n".join(render([Column("id", "id"), Column("title", "title", wrap=True)], rows)))

@@ -13,7 +13,9 @@ from typing import Any
 
 import typer
 
-app = typer.Typer(help="Browse mDNS for WoT Things and directories.")
+app = typer.Typer(help="Browse mDNS for WoT Things and directories.", rich_markup_mode=None)
+
+__all__ = ["app", "browse"]
 
 
 async def browse(seconds: float, interfaces: list[str] | None, fetch: bool) -> list[dict[str, Any]]:
@@ -51,7 +53,7 @@ async def browse(seconds: float, interfaces: list[str] | None, fetch: bool) -> l
     return rows
 
 
-@app.command()
+@app.command(short_help="WoT Things and directories announced by mDNS.")
 def discover(
     timeout: float = typer.Option(3.0, help="Seconds to listen for announcements."),
     interface: list[str] = typer.Option(None, help="Only this interface address (repeatable), "
@@ -67,11 +69,9 @@ def discover(
     if not rows:
         typer.echo(f"no WoT services announced within {timeout:g} s")
         return
-    from rich.console import Console
-    from rich.table import Table
+    from ._table import Column, render
 
-    table = Table("type", "name", "TD URL", "id", "title")
-    for r in rows:
-        table.add_row(r["type"], r["name"], r["url"], str(r.get("id") or r.get("error", "")),
-                      str(r.get("title") or ""))
-    Console().print(table)
+    shown = [{**r, "id": r.get("id") or r.get("error", ""), "title": r.get("title") or ""} for r in rows]
+    columns = [Column("type", "type"), Column("TD URL", "url"), Column("name", "name", drop=2),
+               Column("id", "id", drop=1), Column("title", "title", drop=3, wrap=True)]
+    typer.echo("\n".join(render(columns, shown)))

@@ -8,7 +8,10 @@ from pathlib import Path
 
 import typer
 
-app = typer.Typer(help="Print and validate Tactile Thing Descriptions.", no_args_is_help=True)
+app = typer.Typer(help="Print and validate Tactile Thing Descriptions.", no_args_is_help=True,
+                  rich_markup_mode=None)
+
+__all__ = ["app"]
 
 
 class Shape(StrEnum):
@@ -34,26 +37,68 @@ def show(
     typer.echo(json.dumps(out, indent=2))
 
 
-@app.command()
+@app.command(short_help="Check a TD (a file, a URL or -) against TD 1.1 and Tactile.")
 def validate(
-    file: Path = typer.Argument(..., exists=True, dir_okay=False, help="TD JSON file."),
+    source: str = typer.Argument(..., help="A TD: a JSON file, an http(s) URL (a served TD), or - for "
+                                           "standard input."),
     td_only: bool = typer.Option(False, help="Check TD 1.1 only, not the Tactile vocabulary."),
+    token: str = typer.Option(None, "--token", envvar="WOTT_HUB_TOKEN",
+                              help="Bearer token, for a URL of a hub that asks for one."),
 ) -> None:
-    """Check a TD file against TD 1.1, the Tactile vocabulary and the interop rules.
+    """Check a TD against TD 1.1, the Tactile vocabulary and the interop rules.
 
-    Prints each failing field with its JSON path; exit code 1 if any fail.
+    Prints each failing field with its JSON path; exit code 1 if any fail or the URL
+    cannot be fetched, 2 if the source is not a readable JSON document, 3 if the URL
+    has no TD (404).
     """
     from wott_hub.td.validate import validate_td
 
-    try:
-        doc = json.loads(file.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        typer.echo(f"{file}: not JSON: {e}", err=True)
-        raise typer.Exit(1) from None
+    doc = _load(source, token)
     problems = validate_td(doc, tactile=not td_only, interop=not td_only)
     for p in problems:
-        typer.echo(f"{file}: {p}")
+        typer.echo(f"{source}: {p}")
     if problems:
-        typer.echo(f"{file}: {len(problems)} problem(s)", err=True)
+        typer.echo(f"{source}: {len(problems)} problem(s)", err=True)
         raise typer.Exit(1)
-    typer.echo(f"{file}: valid")
+    typer.echo(f"{source}: valid")
+
+
+def _read(source: str, token: str | None) -> str:
+    """The text at ``source`` (a file, a URL, ``-``); a WottHubError saying why it cannot be read."""
+    import sys
+
+    from wott_hub.errors import InvalidInput, NotFound, WottHubError
+
+    if source == "-":
+        return sys.stdin.read()
+    if source.startswith(("http://", "https://")):
+        import httpx
+
+        headers = {"Accept": "application/td+json, application/json"}
+        if token:
+            headers["Authorization"] = f"Bearer {token}"
+        try:
+            r = httpx.get(source, headers=headers, timeout=30, follow_redirects=True)
+        except httpx.HTTPError as e:
+            raise WottHubError(f"{source}: cannot fetch: {e}") from None
+        if r.status_code == 404:
+            raise NotFound(f"{source}: no TD there (HTTP 404)")
+        if r.status_code >= 400:
+            raise WottHubError(f"{source}: HTTP {r.status_code} {r.reason_phrase}")
+        return r.text
+    try:
+        return Path(source).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InvalidInput(f"{source}: no such file (a TD file, an http(s) URL or -)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InvalidInput(f"{source}: cannot read: {getattr(e, 'strerror', None) or e}") from None
+
+
+def _load(source: str, token: str | None) -> object:
+    from wott_hub.errors import InvalidInput
+
+    text = _read(source, token)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise InvalidInput(f"{source}: not JSON: {e}") from None

@@ -25,7 +25,7 @@ import json
 import sqlite3
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Engine
@@ -33,15 +33,19 @@ from sqlalchemy.engine import Engine
 from wott_hub.errors import HistoryError, NotFound
 from wott_hub.events.record import Record
 
-from .codec import decode_joined, decode_many
 from .db import describe
 from .db_errors import database_error, driver_message, is_database_error
 from .models import EventRow, ThingRow
-from .sqlite import JoinedPage, joined_page
 from .state import state_of
 from .storage import Columns, ThingSummary
 
-__all__ = ["HistoryReader"]
+if TYPE_CHECKING:  # NumPy, imported by the reads that decode pages: listing what is recorded needs none
+    from .sqlite import JoinedPage
+
+__all__ = ["FIRST_PAGE", "HistoryReader"]
+
+FIRST_PAGE = 1000
+"""Records in the first page of a range (``HistoryReader.columns``), the rest in full pages."""
 
 _E = EventRow.__table__
 _T = ThingRow.__table__
@@ -76,11 +80,15 @@ def _seq_range(key: int, after: int, upto: int, limit: int) -> sa.Select[int, in
 def _columns(rows: Sequence[Sequence[Any]]) -> Columns:
     """(seq, t_ns, kind, name, stored) rows, not empty, as columns with the text sent live for
     ``stored``: the packets of the rows decoded together, the columns moved by C-level ``zip``s."""
+    from .codec import decode_many
+
     seqs, times, kinds, names, stored = zip(*rows, strict=True)
     return Columns(seqs, times, kinds, names, decode_many(stored, times))
 
 
 def _joined_columns(page: JoinedPage) -> Columns:
+    from .codec import decode_joined
+
     return Columns(page.seqs.tolist(), page.times.tolist(), page.kinds.tolist(), page.names,
                     decode_joined(page.joined, page.sizes, page.times))
 
@@ -140,21 +148,28 @@ class HistoryReader:
     # --- what is recorded -----------------------------------------------------------
 
     @_guarded
-    def things(self) -> list[ThingSummary]:
+    def things(self, *, count: bool = True) -> list[ThingSummary]:
+        """Every recorded Thing with its first and last seq and time: one statement, each bound an
+        index's first or last entry (``uq_events_thing_key``, ``ix_events_thing_time``), so it
+        costs the same on a minute of history as on a day. ``count``: the exact number of
+        records too, which no index holds: a scan of the Thing's index entries (~0.1 s per
+        million on SQLite); without it, ``count`` is None."""
+        def end(col: Any, last: bool) -> Any:
+            return (sa.select(col).where(_E.c.thing_key == _T.c.key)
+                    .order_by(col.desc() if last else col).limit(1).scalar_subquery())
+
+        q = sa.select(_T.c.key, _T.c.id, _T.c.title, _T.c.family, end(_E.c.seq, False), end(_E.c.seq, True),
+                      end(_E.c.t_ns, False), end(_E.c.t_ns, True)).order_by(_T.c.id)
         out = []
         with self.engine.connect() as conn:
-            rows = conn.execute(sa.select(_T.c.key, _T.c.id, _T.c.title, _T.c.family).order_by(_T.c.id)).all()
-            for key, tid, title, family in rows:
-                count, s0, s1 = conn.execute(
-                    sa.select(sa.func.count(), sa.func.min(_E.c.seq), sa.func.max(_E.c.seq))
-                    .where(_E.c.thing_key == key)).one()
-                t0 = t1 = None
-                if count:
-                    t0 = conn.execute(sa.select(_E.c.t_ns).where(_E.c.thing_key == key)
-                                      .order_by(_E.c.t_ns).limit(1)).scalar()
-                    t1 = conn.execute(sa.select(_E.c.t_ns).where(_E.c.thing_key == key)
-                                      .order_by(_E.c.t_ns.desc()).limit(1)).scalar()
-                out.append(ThingSummary(tid, title, family, count, s0, s1, t0, t1))
+            for key, tid, title, family, s0, s1, t0, t1 in conn.execute(q).all():
+                n: int | None = None
+                if s0 is None:
+                    n = 0
+                elif count:
+                    n = conn.execute(sa.select(sa.func.count()).select_from(_E)
+                                     .where(_E.c.thing_key == key)).scalar_one()
+                out.append(ThingSummary(tid, title, family, n, s0, s1, t0, t1))
         return out
 
     @_guarded
@@ -258,7 +273,8 @@ class HistoryReader:
         """On SQLite each page is one row of ``sqlite.JOINED``, the next one read in a thread of its
         own while this one is decoded and used (a query is one step of SQLite, run without the
         GIL: it overlaps the Python work); elsewhere, and for a page ``JOINED`` cannot give, the
-        driver's rows transposed by one C-level ``zip``."""
+        driver's rows transposed by one C-level ``zip``. The first page is at most ``FIRST_PAGE``
+        records: a replay or an export starts as soon as those are read, not a whole page later."""
         bounds = self.seq_range(thing, t_from_ns, t_to_ns)
         if bounds is None:
             return
@@ -268,11 +284,13 @@ class HistoryReader:
         lo, hi = bounds
         cursor = lo - 1
         ahead = None
+        size = min(page, FIRST_PAGE)
         pool = ThreadPoolExecutor(1, thread_name_prefix="history-page") if self._joins else None
         try:
             while cursor < hi:
                 if pool is not None and ahead is None:
-                    ahead = pool.submit(self._joined, key, cursor, hi, t_from_ns, t_to_ns, names, page)
+                    ahead = pool.submit(self._joined, key, cursor, hi, t_from_ns, t_to_ns, names, size)
+                    size = page
                 joined = ahead.result() if ahead is not None else None
                 ahead = None
                 if joined is not None:
@@ -283,7 +301,8 @@ class HistoryReader:
                         ahead = pool.submit(self._joined, key, cursor, hi, t_from_ns, t_to_ns, names, page)
                     yield _joined_columns(joined)
                     continue
-                rows = self._fetch(_seq_range(key, cursor, hi, page))
+                rows = self._fetch(_seq_range(key, cursor, hi, size))
+                size = page
                 if not rows:
                     return
                 cursor = rows[-1][0]
@@ -307,6 +326,8 @@ class HistoryReader:
                 names: list[str] | None, limit: int) -> JoinedPage | None:
         lo_t = t_from_ns if t_from_ns is not None else -1 << 63
         hi_t = t_to_ns if t_to_ns is not None else (1 << 63) - 1
+        from .sqlite import joined_page
+
         with self.engine.connect() as conn:
             raw = conn.connection.driver_connection
             assert isinstance(raw, sqlite3.Connection)

@@ -89,7 +89,7 @@ class ThingSummary:
     id: str
     title: str
     family: str
-    count: int
+    count: int | None  # None: not counted (``StorageReader.things(count=False)``)
     first_seq: int | None
     last_seq: int | None
     first_t_ns: int | None
@@ -121,7 +121,10 @@ class StorageReader(Protocol):
         """Why this database cannot be trusted to answer (known corrupted), else ""."""
         ...
 
-    def things(self) -> list[ThingSummary]: ...
+    def things(self, *, count: bool = True) -> list[ThingSummary]:
+        """Every recorded Thing, its first and last seq and time; ``count``: its exact number of
+        records too (the one part that reads more than an index's ends)."""
+        ...
 
     def thing_info(self, thing: str) -> dict[str, Any] | None:
         """Title, family, TD and static property values recorded for ``thing``."""

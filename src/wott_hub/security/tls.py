@@ -26,8 +26,9 @@ def server_context(cert: str | Path, key: str | Path) -> ssl.SSLContext:
     ctx.minimum_version = ssl.TLSVersion.TLSv1_2
     try:
         ctx.load_cert_chain(str(cert), str(key))
-    except FileNotFoundError as e:
-        raise ConfigError(f"[security]: cannot read {e.filename}: {e.strerror}") from None
+    except FileNotFoundError as e:  # ssl names no file: say which of the two is missing
+        missing = [str(p) for p in (cert, key) if not Path(p).is_file()] or [f"{cert} or {key}"]
+        raise ConfigError(f"[security]: cannot read {' and '.join(missing)}: {e.strerror}") from None
     except (ssl.SSLError, OSError) as e:
         raise ConfigError(f"[security] cert/key: {cert}, {key}: not a matching PEM certificate and "
                           f"key ({e})") from None
