@@ -160,6 +160,7 @@ class HistoryWriter:
         self._abandoned = False  # stop() gave up waiting: the thread must not touch queue or spool
         self._lock = threading.Lock()  # the spool, the queue's hand-overs, ``_inflight``
         self._inflight: list[list[Record]] = []  # batches taken from the queue, not yet done
+        self._taken_at = 0.0  # time.monotonic() the last batch was taken
         self._started: dict[str, int] = {}  # the seq each Thing registered this run started after
         if spool is not None:
             spool.open()
@@ -273,10 +274,28 @@ class HistoryWriter:
                 "spooled": self.spooled, "forwarded": self.forwarded, "dropped": sp.dropped}
 
     def hurry(self) -> None:
-        """Stop waiting for the database: failing batches go to the spool at once, and ``stop``
-        waits at most ``_HURRY_S`` more (a second Ctrl-C)."""
+        """Stop waiting for the database (a second Ctrl-C): if batches are failing, or one has been in
+        the database's hands for ``_HURRY_S`` already, what is held goes to the spool now (in a thread
+        of its own: the disk may be slow too), whatever the rest of the stop is doing; from now on a
+        failing batch goes there at once, and ``stop`` waits at most ``_HURRY_S`` more."""
         self._hurry = True
         self._wake.set()
+        stuck = self._inflight and time.monotonic() - self._taken_at > _HURRY_S
+        if self.spool is not None and (self._failing or stuck):
+            threading.Thread(target=self._spill_held, name="history-hurry", daemon=True).start()
+
+    def _spill_held(self) -> None:
+        """The batches in the database's hands and the queue onto the spool (a batch committed after
+        all is left out when the spool is forwarded); the thread does not put them back."""
+        with self._lock:
+            if self._abandoned:
+                return
+            taken = self._inflight
+            self._inflight = []
+            held = [r for b in taken for r in b] + self._drain()
+            if held and not self._spill_records(held):
+                self._inflight = taken  # the disk refused: still held, reported at stop
+                self._queue.extendleft(reversed(held[sum(len(b) for b in taken):]))
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Write everything queued (and what the spool holds), mark clean shutdown (no sequence gap
@@ -318,9 +337,8 @@ class HistoryWriter:
             return
         try:
             self._abandoned = True
-            held = [r for b in self._inflight for r in b] + list(self._queue)
+            held = [r for b in self._inflight for r in b] + self._drain()
             self._inflight.clear()
-            self._queue.clear()
             if held and not self._spill_records(held):
                 self._queue.extend(held)  # reported as not recorded
         finally:
@@ -432,10 +450,14 @@ class HistoryWriter:
         with self._lock:
             if self._abandoned or not self._queue:
                 return
-            records = list(self._queue)
-            self._queue.clear()
+            records = self._drain()
             if not self._spill_records(records):
                 self._queue.extendleft(reversed(records))  # kept in memory (bounded by queue_max)
+
+    def _drain(self) -> list[Record]:
+        """Everything queued, taken off (a record submitted meanwhile stays queued: never lost)."""
+        q = self._queue
+        return [q.popleft() for _ in range(len(q))]
 
     def _spill_records(self, records: list[Record]) -> bool:
         """``records`` onto the spool (the lock held); False if the disk refused them."""
@@ -585,6 +607,7 @@ class HistoryWriter:
             batch = [q.popleft() for _ in range(min(len(q), self.batch_max))]
             if batch:
                 self._inflight.append(batch)
+                self._taken_at = time.monotonic()
             return batch
 
     def _done(self, *batches: list[Record]) -> None:
@@ -596,8 +619,9 @@ class HistoryWriter:
     def _requeue(self, records: list[Record], batches: list[list[Record]]) -> None:
         """``records`` (what is left of ``batches``) back at the head of the queue, retried first."""
         with self._lock:
+            held = [x for x in self._inflight if any(x is b for b in batches)]
             self._inflight = [x for x in self._inflight if not any(x is b for b in batches)]
-            if not self._abandoned:  # else stop() spooled them already
+            if not self._abandoned and len(held) == len(batches):  # else spooled already (stop, hurry)
                 self._queue.extendleft(reversed(records))
 
     def _write_isolating(self, batch: list[Record], encoded: _Ahead | _Given | None = None,
