@@ -67,7 +67,10 @@ class RunningHub:
         uv = os.environ.get("UV") or shutil.which("uv")
         assert uv, "uv not found: run the tests with `uv run pytest`"
         root = Path(__file__).resolve().parents[2]
-        self.log_path = Path(cwd) / "hub.log"
+        n = 1
+        while (Path(cwd) / f"hub-{n}.log").exists():  # each run of a test's hubs keeps its own log
+            n += 1
+        self.log_path = Path(cwd) / f"hub-{n}.log"
         self._log = self.log_path.open("w")
         cmd = [uv, "run", "--no-sync", "--project", str(root), "wott-hub", "run", "--json",
                "--log-level", "info", *args]

@@ -306,7 +306,8 @@ class HistoryWriter:
             return
         self._stop = True
         self._wake.set()
-        deadline = time.monotonic() + timeout_s
+        t0 = time.monotonic()
+        deadline = t0 + timeout_s
         hurried = False
         while thread.is_alive() and time.monotonic() < deadline:
             thread.join(0.05)
@@ -314,7 +315,7 @@ class HistoryWriter:
                 hurried, deadline = True, min(deadline, time.monotonic() + _HURRY_S)
         self._thread = None
         if thread.is_alive():
-            self._abandon(timeout_s)
+            self._abandon(time.monotonic() - t0)
         if self._process is not None:
             self._process.close()
         if not (self._abandoned or self._failing):  # a database that fails or hangs is not asked again
@@ -327,11 +328,11 @@ class HistoryWriter:
         if self.spool is not None:
             self.spool.close()
 
-    def _abandon(self, timeout_s: float) -> None:
+    def _abandon(self, waited_s: float) -> None:
         """The thread is stuck in the database: the batches it holds and the queue go to the spool
         (a batch it commits after all is left out when the spool is forwarded)."""
-        log.error("the history writer did not finish within %.0f s (the database does not answer); "
-                  "what it holds goes to the spool", timeout_s)
+        log.error("the history writer did not finish in %.1f s (the database does not answer); "
+                  "what it holds goes to the spool", waited_s)
         if not self._lock.acquire(timeout=2.0):
             self._abandoned = True
             return

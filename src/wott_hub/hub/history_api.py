@@ -206,8 +206,8 @@ async def _export(history: HubHistory, x: dict[str, Any]) -> Stream:
     if not isinstance(scene, bool):
         raise InvalidInput(f"'scene' must be true or false, got {scene!r}")
     hz = x.get("sceneHz", 30)
-    if isinstance(hz, bool) or not isinstance(hz, int | float) or not (math.isfinite(hz)
-                                                                       and MIN_SCENE_HZ <= hz <= MAX_SCENE_HZ):
+    number = isinstance(hz, int | float) and not isinstance(hz, bool)
+    if not (number and math.isfinite(hz) and MIN_SCENE_HZ <= hz <= MAX_SCENE_HZ):
         raise InvalidInput(f"'sceneHz' must be a number in [{MIN_SCENE_HZ:g}, {MAX_SCENE_HZ:g}], got {hz!r}")
     reader = _reader(history)
 
