@@ -303,6 +303,8 @@ class HistoryWriter:
         after ``hurry``) the thread is left behind and what it holds goes to the spool."""
         thread = self._thread
         if thread is None:
+            if self.spool is not None:  # never started: its spool is free for the next writer
+                self.spool.close()
             return
         self._stop = True
         self._wake.set()

@@ -164,7 +164,7 @@ class AuditLog:
         table = AuditRow.__table__
         now = time.monotonic()
         rows = self._rows
-        while rows and next(iter(rows.values()))[1] < now - MERGE_S:
+        while rows and (next(iter(rows.values()))[1] < now - MERGE_S or len(rows) > 5 * MAX_WAITING):
             rows.popitem(last=False)
         merge: list[AuditEntry] = []
         new: list[AuditEntry] = []
