@@ -32,10 +32,9 @@ from __future__ import annotations
 
 import os
 import struct
-import time
 import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
@@ -65,7 +64,6 @@ class Segment:
     records: int = 0
     size: int = 0
     first_t_ns: int | None = None
-    spooled_at: float = field(default_factory=time.time)  # wall time of its first frame
 
 
 class Spool:
@@ -107,7 +105,7 @@ class Spool:
                            "give each hub its own [hub] history_spool") from None
         self._lock_file = lock
         for path in sorted(self.folder.glob("*.seg"), key=_number):
-            seg = Segment(_number(path), path, spooled_at=path.stat().st_mtime)
+            seg = Segment(_number(path), path)
             rows = self._read(seg)
             if not rows:
                 path.unlink(missing_ok=True)
@@ -137,11 +135,6 @@ class Spool:
     def oldest_t_ns(self) -> int | None:
         """The record time of the oldest record waiting (None: empty)."""
         return self._segments[0].first_t_ns if self._segments else None
-
-    @property
-    def oldest_spooled_at(self) -> float | None:
-        """When (wall time) the oldest segment waiting was begun (None: empty)."""
-        return self._segments[0].spooled_at if self._segments else None
 
     # --- writing ------------------------------------------------------------------------
 

@@ -268,9 +268,9 @@ class HistoryWriter:
         """What waits in the spool: records, bytes, the age of the oldest, what went where."""
         sp = self.spool
         assert sp is not None
-        since = sp.oldest_spooled_at
+        oldest = sp.oldest_t_ns  # the age of what waits: since the oldest record was made
         return {"path": str(sp.folder), "records": sp.records, "bytes": sp.bytes, "maxBytes": sp.max_bytes,
-                "oldestAgeS": None if since is None else round(max(0.0, time.time() - since), 3),
+                "oldestAgeS": None if oldest is None else round(max(0.0, (time.time_ns() - oldest) / 1e9), 3),
                 "spooled": self.spooled, "forwarded": self.forwarded, "dropped": sp.dropped}
 
     def hurry(self) -> None:
