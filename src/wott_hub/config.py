@@ -90,7 +90,8 @@ class HubConfig:
     history_spool: Text | None = field(default=None, metadata=doc(
         "Folder where records wait while the database cannot take them (store and forward, "
         "docs/reliability.md); default: <database>.spool beside a SQLite file, else "
-        "<config file stem>.spool beside the config file, else wott-hub.spool in the working folder."))
+        "<config file stem>.spool beside the config file, else wott-hub.spool/<hub id> in the working "
+        "folder; made only when records must wait."))
     history_spool_mb: SpoolMegabytes = field(default=256.0, metadata=doc(
         "The spool holds at most this many MB; beyond it its oldest records are dropped (and counted)."))
     history_skip: DeviceIds = field(default=(), metadata=doc(

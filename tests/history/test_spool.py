@@ -84,6 +84,8 @@ def test_the_spool_is_bounded_and_drops_its_oldest_segments_counting_them(tmp_pa
 def test_a_second_process_cannot_take_the_same_spool(tmp_path):
     sp = Spool(tmp_path / "s", 1 << 20)
     sp.open()
+    assert not (tmp_path / "s").exists()  # nothing waits: no folder until something must
+    sp.append(_rows("a", 1, 1))
     code = textwrap.dedent(f"""
         from wott_hub.history.spool import Spool
         from wott_hub.errors import Conflict

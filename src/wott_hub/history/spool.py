@@ -19,9 +19,10 @@ Contract:
   ``fsync``-ed before it returns. A frame torn by a crash fails its CRC and ends the segment's
   reading; what came before it is intact. Spooled records count as durable: in ``committed``
   mode subscribers get them once they are on disk.
-- One process per spool: ``open`` takes an exclusive ``flock`` on ``lock`` in the folder
-  (``Conflict`` naming the holder folder otherwise); the database's writer lease keeps two hubs
-  off one database in the same way.
+- One process per spool: an exclusive ``flock`` on ``lock`` in the folder, taken by ``open`` if
+  the folder exists and by the first ``append`` otherwise (``Conflict`` naming the folder if
+  another holds it); the database's writer lease keeps two hubs off one database in the same
+  way. A hub whose database never failed leaves no folder behind.
 
 Layout: a folder of segments ``<n>.seg`` (n ascending: the order they were written), each
 ``MAGIC`` then frames. A segment is written only while it is the last one ("the tail"); it is
@@ -88,7 +89,23 @@ class Spool:
     # --- opening ------------------------------------------------------------------------
 
     def open(self) -> None:
-        """Take the folder (``Conflict`` if another process has it) and read what a previous run left."""
+        """Read what a previous run left, if anything (the folder taken: ``Conflict`` if another
+        process has it); a folder that does not exist is made by the first ``append``."""
+        if not self.folder.is_dir():
+            return
+        self._take_folder()
+        for path in sorted(self.folder.glob("*.seg"), key=_number):
+            seg = Segment(_number(path), path)
+            rows = self._read(seg)
+            if not rows:
+                path.unlink(missing_ok=True)
+                continue
+            self._count(seg, rows)
+            self._segments.append(seg)
+
+    def _take_folder(self) -> None:
+        if self._lock_file is not None:
+            return
         import fcntl
 
         try:
@@ -104,14 +121,6 @@ class Spool:
             raise Conflict(f"the history spool {str(self.folder)!r} is in use by another process; "
                            "give each hub its own [hub] history_spool") from None
         self._lock_file = lock
-        for path in sorted(self.folder.glob("*.seg"), key=_number):
-            seg = Segment(_number(path), path)
-            rows = self._read(seg)
-            if not rows:
-                path.unlink(missing_ok=True)
-                continue
-            self._count(seg, rows)
-            self._segments.append(seg)
 
     def close(self) -> None:
         if self._tail is not None:
@@ -144,6 +153,7 @@ class Spool:
         (nothing of ``rows`` is then kept)."""
         if not rows:
             return 0
+        self._take_folder()
         body = self._encoder.encode(list(rows))
         frame = _FRAME.pack(len(body), zlib.crc32(body)) + body
         tail = self._segments[-1] if self._segments and self._tail is not None else None

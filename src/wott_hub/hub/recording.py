@@ -35,10 +35,11 @@ if TYPE_CHECKING:
 __all__ = ["HubHistory", "spool_folder"]
 
 
-def spool_folder(config: HubConfig) -> Path:
+def spool_folder(config: HubConfig, hub_id: str | None = None) -> Path:
     """Where the writer's spool lives: ``[hub] history_spool``; else beside a SQLite database
-    (``<file>.spool``), else beside the config file (``<stem>.spool``), else ``wott-hub.spool`` in
-    the working folder (a PostgreSQL URL given on the command line)."""
+    (``<file>.spool``), else beside the config file (``<stem>.spool``), else
+    ``wott-hub.spool/<hub id>`` in the working folder (a PostgreSQL URL given on the command line:
+    hubs started there each have their own). Made only when something must wait in it."""
     if config.history_spool:
         return Path(config.history_spool)
     db = config.database
@@ -50,7 +51,7 @@ def spool_folder(config: HubConfig) -> Path:
     if not config.source.startswith("<"):
         conf = Path(config.source).resolve()
         return conf.with_name(conf.stem + ".spool")
-    return Path("wott-hub.spool").resolve()
+    return Path("wott-hub.spool").resolve() / (hub_id or "wott-hub")
 
 
 class HubHistory:
@@ -89,7 +90,8 @@ class HubHistory:
                 writer = HistoryWriter(engine, batch_max=cfg.history_batch_max,
                                        interval_s=cfg.history_batch_ms / 1000, retention=cfg.retention,
                                        on_commit=committed, process=cfg.history_process,
-                                       spool=Spool(spool_folder(cfg), int(cfg.history_spool_mb * 1e6)),
+                                       spool=Spool(spool_folder(cfg, self.hub_id),
+                                                   int(cfg.history_spool_mb * 1e6)),
                                        **({"hub_id": self.hub_id} if self.hub_id else {}))
                 if cfg.directory.enabled:  # its directory writes here too: own the database before serving it
                     writer.acquire_lease()  # a second hub on this database refuses here (Conflict)
