@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from wott_hub.config import HubConfig
     from wott_hub.drivers.base import Driver
     from wott_hub.errors import (
+        Busy,
         ConfigError,
         Conflict,
         DriverError,
@@ -50,6 +51,7 @@ _LAZY = {
     "DeviceConfig": "wott_hub.plugins.model",
     "Driver": "wott_hub.drivers.base",
     "WottHubError": "wott_hub.errors",
+    "Busy": "wott_hub.errors",
     "ConfigError": "wott_hub.errors",
     "Conflict": "wott_hub.errors",
     "DriverError": "wott_hub.errors",
@@ -62,6 +64,7 @@ _LAZY = {
 }
 
 __all__ = [
+    "Busy",
     "ConfigError",
     "Conflict",
     "DeviceConfig",

@@ -55,6 +55,7 @@ Text = Annotated[str, says("a non-empty string", pattern=r"\S")]
 Port = Annotated[int, says("a port number (0: any free port)", ge=0, le=65535)]
 Days = Annotated[float, says("a positive number", gt=0, le=36_500)]
 Megabytes = Annotated[float, says("a positive number", gt=0, le=1e9)]
+SpoolMegabytes = Annotated[float, says("a number of MB from 1", ge=1, le=1e6)]
 BatchMs = Annotated[float, says("a positive number of milliseconds", gt=0, le=60_000)]
 Seconds = Annotated[float, says("a positive number of seconds", gt=0, le=3_600)]
 Workers = Annotated[int, says("a whole number of processes (0: none)", ge=0, le=MAX_WORKERS)]
@@ -101,6 +102,13 @@ class HubConfig:
     history_process: Flag = field(default=True, metadata=doc(
         "Encode and write the history batches in a process of their own (off the event loop's "
         "GIL; docs/history.md); false: in a thread of the hub's process."))
+    history_spool: Text | None = field(default=None, metadata=doc(
+        "Folder where records wait while the database cannot take them (store and forward, "
+        "docs/reliability.md); default: <database>.spool beside a SQLite file, else "
+        "<config file stem>.spool beside the config file, else wott-hub.spool/<hub id> in the working "
+        "folder; made only when records must wait."))
+    history_spool_mb: SpoolMegabytes = field(default=256.0, metadata=doc(
+        "The spool holds at most this many MB; beyond it its oldest records are dropped (and counted)."))
     history_skip: DeviceIds = field(default=(), metadata=doc(
         "Device ids whose events are served live but not recorded."))
     ring_size: RingSize = field(default=4096, metadata=doc(
@@ -148,6 +156,8 @@ class HubConfig:
         db = cfg.database
         if "://" not in db and not Path(db).is_absolute():  # relative to the config file
             cfg = _replace(cfg, database=str((path.parent / db).resolve()))
+        if cfg.history_spool is not None and not Path(cfg.history_spool).is_absolute():
+            cfg = _replace(cfg, history_spool=str((path.parent / cfg.history_spool).resolve()))
         return _replace(cfg, security=cfg.security.resolved(path.parent))
 
     @classmethod

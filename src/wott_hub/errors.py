@@ -29,6 +29,7 @@ from __future__ import annotations
 __all__ = [
     "EXIT_CODES",
     "HTTP_STATUS",
+    "Busy",
     "ConfigError",
     "Conflict",
     "DriverError",
@@ -64,6 +65,10 @@ class Conflict(WottHubError):
     """The request clashes with the current state (an id already served, a database in use)."""
 
 
+class Busy(WottHubError):
+    """The hub is doing as much of this as it allows at once (e.g. history exports): try again later."""
+
+
 class DriverError(WottHubError):
     """A device cannot be opened or run at all (model contract mismatch, no port, a plugin's bug)."""
 
@@ -93,6 +98,7 @@ HTTP_STATUS: dict[type[WottHubError], int] = {
     InvalidInput: 400,
     NotFound: 404,
     Conflict: 409,
+    Busy: 503,
     DriverError: 422,
     HistoryError: 503,
     WottHubError: 500,
@@ -103,6 +109,7 @@ EXIT_CODES: dict[type[WottHubError], int] = {
     InvalidInput: 2,
     NotFound: 3,
     Conflict: 4,
+    Busy: 4,
     DriverError: 5,
     HistoryError: 6,
     WottHubError: 1,

@@ -30,7 +30,7 @@ from .db_errors import database_error, translated
 if TYPE_CHECKING:
     from alembic.config import Config
 
-__all__ = ["check_integrity", "create_engine", "current_revision", "database_url",
+__all__ = ["CONNECT_TIMEOUT_S", "check_integrity", "create_engine", "current_revision", "database_url",
            "describe", "migrations_dir", "open_existing", "upgrade"]
 
 log = logging.getLogger(__name__)
@@ -74,10 +74,20 @@ def describe(url: str | sa.URL) -> str:
         return text
 
 
+CONNECT_TIMEOUT_S = 5
+"""A PostgreSQL server that does not answer (a host gone, packets dropped) fails a connection after
+this long instead of the system's TCP timeout (minutes): the writer then spools and a stop stays
+bounded. A URL's own ``connect_timeout`` wins."""
+
+
 def create_engine(url: str) -> Engine:
     """An engine on ``url``; an unknown scheme or a driver that is not installed is a HistoryError."""
+    args: dict[str, Any] = {}
+    if url.startswith("postgresql") and "connect_timeout" not in url:
+        args["connect_timeout"] = CONNECT_TIMEOUT_S
     try:
-        engine = sa.create_engine(url, future=True, pool_pre_ping=not url.startswith("sqlite"))
+        engine = sa.create_engine(url, future=True, pool_pre_ping=not url.startswith("sqlite"),
+                                  connect_args=args)
     except (sa.exc.ArgumentError, ImportError) as e:  # NoSuchModuleError is an ArgumentError
         raise HistoryError(f"cannot use the history database {describe(url)!r}: {e} (a file path, or a "
                            "URL such as postgresql+psycopg://user@host/db)") from None

@@ -20,7 +20,7 @@ Chunks are zstd-compressed (the ``mcap`` writer's default).
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import IO, Any
 
@@ -32,9 +32,11 @@ from wott_hub.events.record import KIND_EVENT, KIND_NAMES, KIND_PROPERTY
 from .merge import merged_pages
 from .storage import StorageReader
 
-__all__ = ["MESH_EVERY_S", "SCENE_UPDATE_SCHEMA", "ExportSummary", "export_mcap", "topic_of"]
+__all__ = ["CHECK_EVERY", "MESH_EVERY_S", "SCENE_UPDATE_SCHEMA", "ExportSummary", "export_mcap", "topic_of"]
 
 MESH_EVERY_S = 60.0
+CHECK_EVERY = 4096
+"""Records between two calls of an export's ``check`` (a few ms of work)."""
 SKIN_EVENT = "skinDeformedDetection"
 
 _TIME = {"type": "object", "title": "time",
@@ -177,10 +179,12 @@ def _schema_of(td: dict[str, Any] | None, kind: int, name: str) -> dict[str, Any
 
 def export_mcap(reader: StorageReader, out: IO[bytes], things: Sequence[str], *,
                 t_from_ns: int | None = None, t_to_ns: int | None = None, names: list[str] | None = None,
-                scene: bool = True, scene_hz: float = 30.0, color_max_mm: float = 2.0) -> ExportSummary:
+                scene: bool = True, scene_hz: float = 30.0, color_max_mm: float = 2.0,
+                check: Callable[[], None] | None = None) -> ExportSummary:
     """Write the records of ``things`` in [t_from, t_to] (time order across Things) to ``out``.
 
-    ``NotFound`` names a Thing that was never recorded."""
+    ``NotFound`` names a Thing that was never recorded. ``check`` is called between pages and every
+    ``CHECK_EVERY`` records: whatever it raises ends the export (the hub's: its client left)."""
     from mcap.writer import Writer
 
     infos = {}
@@ -234,7 +238,9 @@ def export_mcap(reader: StorageReader, out: IO[bytes], things: Sequence[str], *,
         summary.scene_messages += 1
 
     for records in merged_pages(reader, list(things), t_from_ns, t_to_ns, names):
-        for rec in records:
+        for i, rec in enumerate(records):
+            if check is not None and i % CHECK_EVERY == 0:
+                check()
             thing, t, kind, name, data = rec.thing, rec.t_ns, rec.kind, rec.name, rec.data
             cid = channel(thing, kind, name)
             writer.add_message(cid, t, data.encode(), t, sequence=rec.seq & 0xFFFFFFFF)

@@ -39,9 +39,10 @@ from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY
 __all__ = ["HEAD_REVISION", "KIND_EVENT", "KIND_PROPERTY", "Base", "AuditRow", "EventRow", "HubLeaseRow",
            "ThingRow"]
 
-HEAD_REVISION = "0006"  # 0002: the embedded directory's tables (tdd_things, tdd_events); 0003: hub_lease;
+HEAD_REVISION = "0007"  # 0002: the embedded directory's tables (tdd_things, tdd_events); 0003: hub_lease;
 # 0004: audit_log (wott_hub.security.audit); 0005: hub_lease keyed by hub id (one row per hub);
-# 0006: events.data as bytes (codec.py: skin packets packed), SQLite auto_vacuum incremental
+# 0006: events.data as bytes (codec.py: skin packets packed), SQLite auto_vacuum incremental;
+# 0007: audit_log.count, last_ns (identical audited requests merged into one row)
 """The newest migration in migrations/versions (a test checks it): a database already
 there is opened without importing Alembic, which costs ~0.5 s of start-up."""
 
@@ -122,8 +123,9 @@ class HubLeaseRow(Base):
 
 
 class AuditRow(Base):
-    """One audited request (``wott_hub.security.audit``): every write, action and refused
-    credential. ``who`` is a token's name (never the token), ``target`` a path without its query."""
+    """Audited requests (``wott_hub.security.audit``): every write, action and refused credential.
+    ``who`` is a token's name (never the token), ``target`` a path without its query, cut to 256
+    characters; ``count`` identical requests, the first at ``t_ns``, the last at ``last_ns``."""
 
     __tablename__ = "audit_log"
 
@@ -134,3 +136,5 @@ class AuditRow(Base):
     target: Mapped[str] = mapped_column(Text)
     address: Mapped[str] = mapped_column(String(64))
     status: Mapped[int] = mapped_column(Integer)
+    count: Mapped[int] = mapped_column(Integer, default=1, server_default="1")
+    last_ns: Mapped[int | None] = mapped_column(BigInteger, nullable=True)

@@ -103,7 +103,7 @@ class HistoryReader:
 
     @property
     def failure(self) -> str:
-        return self.state.corrupted
+        return self.state.corrupted or self.state.forwarding
 
     def _failed(self, e: BaseException) -> HistoryError:
         self.state.read_failed(driver_message(e))

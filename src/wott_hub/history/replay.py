@@ -31,6 +31,7 @@ from wott_hub.types import Emit
 
 from .merge import merged_pages
 from .storage import Columns, StorageReader
+from .times import MAX_NS
 
 __all__ = ["Replayer"]
 
@@ -93,7 +94,7 @@ class Replayer:
         start = lo if lo is not None else self.reader.first_time(self.things, None)
         if start is None:  # nothing recorded: the range stays empty either way
             return lo, hi
-        return start + self.offset_ns, hi
+        return min(start + self.offset_ns, MAX_NS), hi  # past 2262 is past anything recorded
 
     def _pages(self, lo: int | None, hi: int | None) -> Iterator[Columns | list[Record]]:
         """One Thing: its pages as ``Columns`` (a ``Record`` is made as each is emitted: cheaper than a

@@ -8,6 +8,12 @@ so the table's size on disk does not say what is used); when over the limit, eve
 time are deleted, the cut-off chosen from the time span the data covers so
 that about 90 % of the limit remains, repeated until under it.
 
+The audit trail (``audit_log``, ``security/audit.py``) is trimmed in the same pass, and
+always, retention configured or not: by age like events (``days``), to at most
+``AUDIT_MAX_ROWS`` rows, and to ``AUDIT_SHARE`` of ``max_mb``. It is trimmed first, so that what
+it uses never makes the size pass delete devices' events (requests anyone can send must not
+erase history: issue 33).
+
 Giving the space back: an SQLite history database is made with ``auto_vacuum =
 INCREMENTAL`` (``db.py``; migration 0006 converts an older file with one ``VACUUM``),
 so after a pass that deleted rows ``PRAGMA incremental_vacuum`` moves the last pages
@@ -33,11 +39,19 @@ from sqlalchemy.engine import Connection, Engine
 
 from wott_hub.errors import InvalidInput
 
-from .models import EventRow, ThingRow
+from .models import AuditRow, EventRow, ThingRow
 
-__all__ = ["Retention", "apply_retention", "give_back", "used_bytes"]
+__all__ = ["AUDIT_MAX_ROWS", "AUDIT_SHARE", "Retention", "apply_retention", "give_back", "trim_audit",
+           "used_bytes"]
 
 log = logging.getLogger(__name__)
+
+AUDIT_MAX_ROWS = 100_000
+"""Audit rows kept at most (~35 MB with paths at their 256-character cut), retention or not."""
+AUDIT_SHARE = 0.05
+"""The part of ``retention_mb`` the audit trail may use."""
+_AUDIT_ROW_BYTES = 120
+"""What an audit row costs beside its target's text (columns, row header, the t_ns index entry)."""
 
 
 @dataclass(frozen=True)
@@ -97,11 +111,41 @@ def _span(conn: Connection, keys: list[int]) -> tuple[int, int] | None:
     return None if lo is None or hi is None else (lo, hi)  # both set together
 
 
-def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> int:
-    """Delete what the policy says is too old or too much; returns the number of events deleted."""
-    if not r.active:
-        return 0
+def trim_audit(engine: Engine, r: Retention, now_ns: int | None = None) -> int:
+    """Delete audit rows older than ``r.days`` and the oldest beyond the audit's budget (rows and
+    bytes); returns how many went."""
+    audit = AuditRow.__table__
     now_ns = now_ns if now_ns is not None else time.time_ns()
+    deleted = 0
+    if r.days:
+        with engine.begin() as conn:
+            deleted += conn.execute(audit.delete().where(
+                audit.c.t_ns < now_ns - int(r.days * 86400e9))).rowcount or 0
+    with engine.connect() as conn:
+        rows, text = conn.execute(sa.select(sa.func.count(), sa.func.coalesce(
+            sa.func.sum(sa.func.length(audit.c.target)), 0))).one()
+    keep = AUDIT_MAX_ROWS
+    if r.max_mb and rows:
+        per_row = _AUDIT_ROW_BYTES + text / rows
+        keep = min(keep, int(AUDIT_SHARE * r.max_mb * 1e6 / per_row))
+    if rows > keep:
+        with engine.begin() as conn:
+            last = conn.execute(sa.select(audit.c.id).order_by(audit.c.id.desc())
+                                .offset(keep).limit(1)).scalar()
+            if last is not None:
+                deleted += conn.execute(audit.delete().where(audit.c.id <= last)).rowcount or 0
+    return deleted
+
+
+def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> int:
+    """Delete what the policy says is too old or too much; returns the number of events deleted.
+    The audit trail is trimmed first (``trim_audit``), retention configured or not."""
+    now_ns = now_ns if now_ns is not None else time.time_ns()
+    trimmed = trim_audit(engine, r, now_ns)
+    if not r.active:
+        if trimmed:
+            give_back(engine)
+        return 0
     deleted = 0
     # reads and deletes in separate transactions: a transaction that reads first and then
     # writes can fail at once on SQLite (stale WAL snapshot) if another connection wrote meanwhile
@@ -125,8 +169,8 @@ def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> 
             deleted += n
             if n == 0:
                 break
-    if deleted:
-        log.info("retention deleted %d events", deleted)
+    if deleted or trimmed:
+        log.info("retention deleted %d events and %d audit rows", deleted, trimmed)
         give_back(engine)
     return deleted
 

@@ -130,6 +130,27 @@ class SqlStorage:
         self.keys[thing] = key
         return int(start)
 
+    def known(self, thing: str) -> bool:
+        """Is ``thing`` in the database (its key then in ``keys``)? For records forwarded from the
+        spool before the Thing is registered again (at the next start)."""
+        if thing in self.keys:
+            return True
+        things = ThingRow.__table__
+        with translated(), self.engine.connect() as conn:
+            key = conn.execute(sa.select(things.c.key).where(things.c.id == thing)).scalar()
+        if key is None:
+            return False
+        self.keys[thing] = int(key)
+        return True
+
+    def recorded(self, thing: str, lo: int, hi: int) -> set[int]:
+        """The seqs in [lo, hi] of ``thing`` the database already has (``known`` Things only)."""
+        events = EventRow.__table__
+        with translated(), self.engine.connect() as conn:
+            rows = conn.execute(sa.select(events.c.seq).where(events.c.thing_key == self.keys[thing])
+                                .where(events.c.seq >= lo).where(events.c.seq <= hi)).scalars()
+            return set(rows)
+
     def release(self, reserved: Mapping[str, int]) -> None:
         things = ThingRow.__table__
         with translated(f"cannot release sequence reservations in {self.describe()!r}"), \

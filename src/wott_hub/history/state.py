@@ -2,7 +2,8 @@
 
 The writer and the reader of a hub open the same engine; a read error the
 reader meets (SSE resume, replay) and the integrity check the writer runs at
-start both land here, so ``HistoryWriter.health()`` reports them in one place.
+start both land here, so ``HistoryWriter.health()`` reports them in one place;
+and the writer's spool says here that history lacks records for now.
 """
 
 from __future__ import annotations
@@ -31,6 +32,9 @@ class DatabaseState:
     read_errors: int = 0
     last_read_error: str = ""
     last_read_error_at: float = 0.0  # time.monotonic()
+    forwarding: str = ""
+    """Set while records wait in the writer's spool (``spool.py``): history lacks them for now, so
+    a resume that needs history is refused (503) rather than served with a silent gap."""
 
     def read_failed(self, message: str) -> None:
         self.read_errors += 1

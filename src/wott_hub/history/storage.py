@@ -22,6 +22,9 @@ Contract of a ``StorageWriter``:
   ``overlaps`` runs ``write``'s ``meanwhile`` steps while the database takes the data, and the
   writer prepares its next batch in them.
 - ``release`` sets the reservations back to what was committed (a clean stop: no gap).
+- ``known`` (is the Thing in the database? its key then in ``keys``) and ``recorded`` (which seqs
+  of a range it has) let the writer forward its spool (``spool.py``) without duplicates, the
+  Things of a previous run included.
 
 A ``StorageReader`` raises ``HistoryError`` for a read the database fails (and notes it in the
 database's ``state``), never an empty answer; it gives records back as ``Record``s, each payload
@@ -78,6 +81,10 @@ class StorageWriter(Protocol):
     def write(self, batch: Prepared, reserve: Mapping[str, int], meanwhile: Step | None = None) -> None: ...
 
     def release(self, reserved: Mapping[str, int]) -> None: ...
+
+    def known(self, thing: str) -> bool: ...
+
+    def recorded(self, thing: str, lo: int, hi: int) -> set[int]: ...
 
     def check_integrity(self) -> None: ...
 

@@ -38,6 +38,15 @@ Contract (what keeps the writer from ever wedging):
   it at a clean stop: a second process of the same hub id on the same database
   gets ``Conflict`` instead of interleaving sequences; hubs of other ids write
   their own Things beside it.
+- Store and forward (``spool``, ``spool.py``): when batches have failed for ``spill_after_s``,
+  when the hub stops while they fail, or when told to ``hurry``, the records held in memory move
+  to the spool on disk (then they count as durable: ``on_commit`` is told); the spool is forwarded
+  before anything newer is written, oldest first, rows the database already has left out; a
+  Thing registered while its records wait there continues above them. While it holds anything,
+  health is "degraded" and a resume that needs history is refused (``DatabaseState.forwarding``).
+- ``stop`` is bounded (``timeout_s``; ``hurry`` shortens it): a writer thread stuck in the
+  database is left behind, and what it and the queue held goes to the spool. What could not be
+  recorded is logged, never dropped without a word.
 """
 
 from __future__ import annotations
@@ -60,6 +69,7 @@ from .db_errors import driver_message
 from .engines import open_storage
 from .lease import DEFAULT_HUB_ID, LEASE_STALE_S
 from .retention import Retention
+from .spool import Spool, SpoolRow
 from .storage import Prepared, Step, StorageWriter
 
 __all__ = ["HistoryWriter", "RESERVE"]
@@ -81,6 +91,10 @@ batch process: catching up matters more then than the event loop's share of the 
 process writes 29,000-54,000 records/s (the hand-over costs ~8 µs a record: pickling the
 records, the pipe, unpickling them), the thread 67,000-82,000 (docs/history.md); a hub keeping
 up has ~770 waiting per 50 ms batch at 64 devices x 120 Hz."""
+_HURRY_S = 1.0
+"""After ``hurry``, how long ``stop`` still waits for the database before it spools and returns."""
+_FORWARD_SLICE_S = 1.0
+"""Forwarding works this long before the thread looks at its lease, its queue and ``stop`` again."""
 _ENCODE_SLICE = 1_000
 """Records encoded per step of ``_Ahead``: about 4 ms, well under the ~20 ms of work that a
 socket's buffer of COPY data gives PostgreSQL (and no dearer per record than a whole batch)."""
@@ -93,12 +107,15 @@ class HistoryWriter:
                  queue_max: int = RESERVE // 2, retention: Retention | None = None,
                  on_commit: Callable[[dict[str, int]], None] | None = None,
                  lease_stale_s: float = LEASE_STALE_S, integrity_check: bool = True,
-                 hub_id: str = DEFAULT_HUB_ID, compact: bool = True, process: bool = False) -> None:
+                 hub_id: str = DEFAULT_HUB_ID, compact: bool = True, process: bool = False,
+                 spool: Spool | None = None, spill_after_s: float = 2.0) -> None:
         """``engine``: the database, written through its storage engine (``engines.open_storage``).
         ``hub_id``: the identity of the hub this writer records for (its lease row, see
         ``lease.py``): hubs of different ids may share one database, each its own Things.
         ``compact``: skin packets stored packed (``codec.py``); False stores every payload as
-        its UTF-8 text (what revision 0005 stored; the storage benchmark's "before")."""
+        its UTF-8 text (what revision 0005 stored; the storage benchmark's "before").
+        ``spool``: where records go when the database cannot take them (opened here: ``Conflict``
+        if another process has it); ``spill_after_s``: how long batches may fail before they do."""
         # a bad value must be refused here: in the writer's thread it would kill it silently
         if not (isinstance(interval_s, int | float) and math.isfinite(interval_s) and 0 < interval_s <= 60):
             raise InvalidInput(f"history batch interval must be in (0, 60] s, got {interval_s!r}")
@@ -134,6 +151,20 @@ class HistoryWriter:
         self._thread: threading.Thread | None = None
         self._process = BatchProcess(self.storage.url, compact) if process else None  # batch_process.py
         self._next_retention = 0.0
+        self.spool = spool
+        self.spill_after_s = spill_after_s
+        self.spooled = 0  # records moved to the spool (this run)
+        self.forwarded = 0  # records written from the spool (any run's)
+        self._failing_since: float | None = None
+        self._hurry = False
+        self._abandoned = False  # stop() gave up waiting: the thread must not touch queue or spool
+        self._lock = threading.Lock()  # the spool, the queue's hand-overs, ``_inflight``
+        self._inflight: list[list[Record]] = []  # batches taken from the queue, not yet done
+        self._taken_at = 0.0  # time.monotonic() the last batch was taken
+        self._started: dict[str, int] = {}  # the seq each Thing registered this run started after
+        if spool is not None:
+            spool.open()
+            self._note_spool()
 
     # --- Things -------------------------------------------------------------------
 
@@ -148,7 +179,10 @@ class HistoryWriter:
         start = self.storage.register(thing, title=title, family=family, td=td, static_values=static_values,
                                       ahead=RESERVE)
         self._reserved[thing] = start + RESERVE
+        if self.spool is not None:  # its records still waiting in the spool were handed out too
+            start = max(start, self.spool.max_seq.get(thing, 0))
         self.committed[thing] = start
+        self._started[thing] = start
         return start
 
     def acquire_lease(self) -> None:
@@ -216,6 +250,9 @@ class HistoryWriter:
             state, reason = "degraded", db.corrupted
         elif self._failing:
             state, reason = "degraded", f"history batches are failing: {self.last_error}"
+        elif self.spool is not None and self.spool.records:
+            state, reason = "degraded", (f"{self.spool.records} records wait in the spool to be written "
+                                         "to the database")
         elif now - self._last_refused < self.degraded_s:
             state, reason = "degraded", (f"{self.failed_records} records could not be recorded; "
                                          f"last: {self.last_error}")
@@ -224,26 +261,113 @@ class HistoryWriter:
         return {"state": state, "reason": reason, "written": self.written, "queued": self.queue_depth,
                 "dropped": self.dropped, "failedRecords": self.failed_records, "errors": self.errors,
                 "lastError": self.last_error, "readErrors": db.read_errors,
-                "integrity": db.integrity or "unchecked", "lease": self._lease.held}
+                "integrity": db.integrity or "unchecked", "lease": self._lease.held,
+                **({"spool": self.spool_health()} if self.spool is not None else {})}
 
-    def stop(self, timeout_s: float = 30.0) -> None:
-        """Write everything queued, mark clean shutdown (no sequence gap on restart), stop."""
-        if self._thread is None:
+    def spool_health(self) -> dict[str, Any]:
+        """What waits in the spool: records, bytes, the age of the oldest, what went where."""
+        sp = self.spool
+        assert sp is not None
+        oldest = sp.oldest_t_ns  # the age of what waits: since the oldest record was made
+        return {"path": str(sp.folder), "records": sp.records, "bytes": sp.bytes, "maxBytes": sp.max_bytes,
+                "oldestAgeS": None if oldest is None else round(max(0.0, (time.time_ns() - oldest) / 1e9), 3),
+                "spooled": self.spooled, "forwarded": self.forwarded, "dropped": sp.dropped}
+
+    def hurry(self) -> None:
+        """Stop waiting for the database (a second Ctrl-C): if batches are failing, or one has been in
+        the database's hands for ``_HURRY_S`` already, what is held goes to the spool now (in a thread
+        of its own: the disk may be slow too), whatever the rest of the stop is doing; from now on a
+        failing batch goes there at once, and ``stop`` waits at most ``_HURRY_S`` more."""
+        self._hurry = True
+        self._wake.set()
+        stuck = self._inflight and time.monotonic() - self._taken_at > _HURRY_S
+        if self.spool is not None and (self._failing or stuck):
+            threading.Thread(target=self._spill_held, name="history-hurry", daemon=True).start()
+
+    def _spill_held(self) -> None:
+        """The batches in the database's hands and the queue onto the spool (a batch committed after
+        all is left out when the spool is forwarded); the thread does not put them back."""
+        with self._lock:
+            if self._abandoned:
+                return
+            taken = self._inflight
+            self._inflight = []
+            held = [r for b in taken for r in b] + self._drain()
+            if held and not self._spill_records(held):
+                self._inflight = taken  # the disk refused: still held, reported at stop
+                self._queue.extendleft(reversed(held[sum(len(b) for b in taken):]))
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Write everything queued (and what the spool holds), mark clean shutdown (no sequence gap
+        on restart), stop; within ``timeout_s`` whatever the database does: past it (or ``_HURRY_S``
+        after ``hurry``) the thread is left behind and what it holds goes to the spool."""
+        thread = self._thread
+        if thread is None:
+            if self.spool is not None:  # never started: its spool is free for the next writer
+                self.spool.close()
             return
         self._stop = True
         self._wake.set()
-        self._thread.join(timeout_s)
-        if self._thread.is_alive():
-            log.error("history writer did not finish within %.0f s; %d records not written",
-                      timeout_s, len(self._queue))
+        t0 = time.monotonic()
+        deadline = t0 + timeout_s
+        hurried = False
+        while thread.is_alive() and time.monotonic() < deadline:
+            thread.join(0.05)
+            if self._hurry and not hurried:
+                hurried, deadline = True, min(deadline, time.monotonic() + _HURRY_S)
         self._thread = None
+        if thread.is_alive():
+            self._abandon(time.monotonic() - t0)
         if self._process is not None:
             self._process.close()
-        self._release_reservations()
+        if not (self._abandoned or self._failing):  # a database that fails or hangs is not asked again
+            self._release_reservations()
+            try:
+                self._lease.release()
+            except Exception as e:  # the next hub takes it over once stale (or at once: this pid is gone)
+                log.warning("could not release the history writer lease: %s", e)
+        self._report()
+        if self.spool is not None:
+            self.spool.close()
+
+    def _abandon(self, waited_s: float) -> None:
+        """The thread is stuck in the database: the batches it holds and the queue go to the spool
+        (a batch it commits after all is left out when the spool is forwarded)."""
+        log.error("the history writer did not finish in %.1f s (the database does not answer); "
+                  "what it holds goes to the spool", waited_s)
+        if not self._lock.acquire(timeout=2.0):
+            self._abandoned = True
+            return
         try:
-            self._lease.release()
-        except Exception as e:  # the next hub takes it over once stale (or at once: this pid is gone)
-            log.warning("could not release the history writer lease: %s", e)
+            self._abandoned = True
+            held = [r for b in self._inflight for r in b] + self._drain()
+            self._inflight.clear()
+            if held and not self._spill_records(held):
+                self._queue.extend(held)  # reported as not recorded
+        finally:
+            self._lock.release()
+
+    def _report(self) -> None:
+        """At stop: say what did not reach the database, and where it is."""
+        waiting = self.spool.records if self.spool is not None else 0
+        if waiting:
+            assert self.spool is not None
+            log.warning("history: %d records could not be written to the database and wait in the spool "
+                        "%s; they are written when the database answers (at the next start)",
+                        waiting, self.spool.folder)
+        lost = len(self._queue) + sum(len(b) for b in self._inflight)
+        if lost:
+            log.error("history: %d records were not recorded (the database did not answer%s)", lost,
+                      "" if self.spool is not None else " and there is no spool")
+        if self.dropped:
+            log.error("history: %d records were not recorded in all (queue or spool full, or the writer "
+                      "lease lost)", self.dropped + lost)
+
+    def outcome(self) -> dict[str, int]:
+        """What became of the records (for a stop report): written, waiting in the spool, not recorded."""
+        lost = len(self._queue) + sum(len(b) for b in self._inflight)
+        return {"written": self.written, "spooled": self.spool.records if self.spool is not None else 0,
+                "lost": self.dropped + lost + self.failed_records}
 
     def flush(self, timeout_s: float = 30.0) -> bool:
         """Block until everything submitted so far is committed (tests, benchmarks, export)."""
@@ -266,34 +390,169 @@ class HistoryWriter:
                 self._process.start()
             except HistoryError as e:  # the first batch starts it again, or reports why not
                 log.warning("%s", e)
-        while True:
+        while not self._abandoned:
             stopping = self._stop
             try:
                 self._refresh_lease()
-                self._write_pending()
-                self._failing = False
+                if self._spool_waiting():  # older than anything queued: first
+                    self._forward()
+                if not self._spool_waiting():
+                    self._write_pending()
+                elif len(self._queue) >= self.batch_max:  # forwarding takes a while: keep memory bounded
+                    self._spill()
+                self._failing, self._failing_since = False, None
                 backoff = 0.1
                 if time.monotonic() >= self._next_retention:
                     self._next_retention = time.monotonic() + self.retention.check_every_s
-                    if self.retention.active:
-                        self.storage.apply_retention(self.retention)
+                    self.storage.apply_retention(self.retention)  # the audit trail's bound even when off
             except Exception as e:  # keep recording: a failed batch is logged, the rest retried
+                if self._abandoned:
+                    return
+                now = time.monotonic()
                 self.errors += 1
                 self.last_error = driver_message(e)
                 self._failing = True
+                self._failing_since = self._failing_since or now
                 if "database disk image is malformed" in self.last_error:
                     self._db.read_failed(self.last_error)
-                log.error("history batch failed (retrying in %.1f s): %s", backoff, self.last_error)
-                time.sleep(backoff)
-                backoff = min(backoff * 2, 5.0)
+                spill = self.spool is not None and (stopping or self._hurry
+                                                    or now - self._failing_since >= self.spill_after_s)
+                log.error("history batch failed (%s): %s", "moving what is queued to the spool" if spill
+                          else f"retrying in {backoff:.1f} s", self.last_error)
+                if spill:
+                    self._spill()
                 if stopping:
                     failures_at_stop += 1
-                    if failures_at_stop >= 3:  # stop() must end: what is left is reported there
+                    if not self._queue or failures_at_stop >= 3:  # stop() must end: the rest is reported
                         return
-            if stopping and not self._queue:
-                return
+                self._wake.wait(backoff)  # a stop or a hurry cuts it short
+                self._wake.clear()
+                backoff = min(backoff * 2, 5.0)
+                continue
+            if stopping:
+                if self._queue and self._spool_waiting():  # the spool is forwarded at the next start
+                    self._spill()
+                if not self._queue:
+                    return
             self._wake.wait(self.interval_s)
             self._wake.clear()
+
+    # --- store and forward --------------------------------------------------------------------
+
+    def _spool_waiting(self) -> bool:
+        return self.spool is not None and self.spool.records > 0
+
+    def _note_spool(self) -> None:
+        """Tell readers whether history lacks records that wait in the spool (a resume then waits)."""
+        sp = self.spool
+        self._db.forwarding = (f"{sp.records} records wait in the spool {str(sp.folder)!r} to be written "
+                               "to the database" if sp is not None and sp.records else "")
+
+    def _spill(self) -> None:
+        """Move everything queued to the spool's tail (then it is durable: ``on_commit``)."""
+        with self._lock:
+            if self._abandoned or not self._queue:
+                return
+            records = self._drain()
+            if not self._spill_records(records):
+                self._queue.extendleft(reversed(records))  # kept in memory (bounded by queue_max)
+
+    def _drain(self) -> list[Record]:
+        """Everything queued, taken off (a record submitted meanwhile stays queued: never lost)."""
+        q = self._queue
+        return [q.popleft() for _ in range(len(q))]
+
+    def _spill_records(self, records: list[Record]) -> bool:
+        """``records`` onto the spool (the lock held); False if the disk refused them."""
+        sp = self.spool
+        if sp is None:
+            return False
+        try:
+            payloads = self.storage.encode(records)
+            rows: list[SpoolRow] = [(r.thing, r.seq, r.kind, r.name, r.t_ns, d)
+                                    for r, d in zip(records, payloads, strict=True)]
+            dropped = sp.append(rows)
+        except Exception as e:
+            log.error("history: cannot spool %d records: %s", len(records), e)
+            return False
+        self.spooled += len(records)
+        self._note_spool()
+        if dropped:
+            self.dropped += dropped
+            log.error("history: the spool %s is full (%d bytes): its %d oldest records were dropped",
+                      sp.folder, sp.max_bytes, dropped)
+        tops: dict[str, int] = {}
+        for r in records:
+            tops[r.thing] = r.seq
+        if self.on_commit is not None:  # on disk: durable, as a commit is
+            self.on_commit(tops)
+        return True
+
+    def _forward(self) -> None:
+        """Write the spool's oldest segments to the database (for ``_FORWARD_SLICE_S`` at most), rows
+        the database already has left out; a segment goes once all of it is in."""
+        sp = self.spool
+        assert sp is not None
+        until = time.monotonic() + _FORWARD_SLICE_S
+        while time.monotonic() < until and not self._abandoned:
+            with self._lock:
+                head = sp.head()
+            if head is None:
+                break
+            seg, rows = head
+            for i in range(0, len(rows), self.batch_max):
+                self._forward_rows(rows[i:i + self.batch_max])
+                if self._abandoned:
+                    return
+            with self._lock:
+                sp.consumed(seg)
+                self._note_spool()
+        self._note_spool()
+
+    def _forward_rows(self, rows: list[SpoolRow]) -> None:
+        storage = self.storage
+        by_thing: dict[str, tuple[int, int]] = {}
+        for thing, seq, *_ in rows:
+            lo, hi = by_thing.get(thing, (seq, seq))
+            by_thing[thing] = (min(lo, seq), max(hi, seq))
+        have: dict[str, set[int]] = {}
+        unknown: set[str] = set()
+        for thing, (lo, hi) in by_thing.items():
+            if storage.known(thing):
+                have[thing] = storage.recorded(thing, lo, hi)
+            else:
+                unknown.add(thing)
+        batch: list[Record] = []
+        payloads: list[bytes] = []
+        mine = 0
+        lost: dict[str, int] = {}
+        for thing, seq, kind, name, t_ns, data in rows:
+            if thing in unknown:
+                lost[thing] = lost.get(thing, 0) + 1
+                continue
+            if seq in have[thing]:
+                mine += self._mine(thing, seq)
+                continue  # written before a crash, or by a thread stop() left behind
+            batch.append(Record(thing, seq, kind, name, t_ns, ""))
+            payloads.append(data)
+        for thing, n in lost.items():  # cannot be: a Thing is registered before its first record
+            self.failed_records += n
+            self._last_refused = time.monotonic()
+            self.last_error = (f"{n} spooled records of {thing!r} not recorded: the Thing is not in "
+                               "the database")
+            log.error("history: %s", self.last_error)
+        if batch:
+            before = self.written
+            self._write_isolating(batch, _Given(payloads), requeue=False)
+            wrote = self.written - before
+            self.forwarded += wrote
+            self.written = before + min(wrote, sum(self._mine(r.thing, r.seq) for r in batch))
+        self.written += mine
+
+    def _mine(self, thing: str, seq: int) -> int:
+        """1 if the record was handed out in this run (``written`` and ``flush`` count those only)."""
+        start = self._started.get(thing)
+        return int(start is not None and seq > start)
 
     def _refresh_lease(self) -> None:
         lease = self._lease
@@ -329,28 +588,54 @@ class HistoryWriter:
         q = self._queue
         batch: list[Record] = []
         encoded: _Ahead | None = None
-        while (batch or q) and not self._lease.lost:
+        while (batch or q) and not self._lease.lost and not self._abandoned:
             if not batch:
                 batch, encoded = self._take(), None
+                if not batch:
+                    break
             process = self._process if encoded is None and len(q) < _CATCH_UP else None
             ahead = _Ahead(self.storage, self._take()) \
                 if self.storage.overlaps and process is None and len(q) >= _AHEAD_MIN else None
             self._write_isolating(batch, encoded, ahead, process)
             batch, encoded = ([], None) if ahead is None else (ahead.batch, ahead)
         if batch:  # taken ahead when the lease was lost: back in the queue, given up with it
-            q.extendleft(reversed(batch))
+            self._requeue(batch, [batch])
 
     def _take(self) -> list[Record]:
+        """The next batch off the queue, kept in ``_inflight`` until it is done."""
         q = self._queue
-        return [q.popleft() for _ in range(min(len(q), self.batch_max))]
+        with self._lock:
+            if self._abandoned:
+                return []
+            batch = [q.popleft() for _ in range(min(len(q), self.batch_max))]
+            if batch:
+                self._inflight.append(batch)
+                self._taken_at = time.monotonic()
+            return batch
 
-    def _write_isolating(self, batch: list[Record], encoded: _Ahead | None = None,
-                         ahead: _Ahead | None = None, process: BatchProcess | None = None) -> None:
+    def _done(self, *batches: list[Record]) -> None:
+        with self._lock:
+            for b in batches:
+                if any(x is b for x in self._inflight):
+                    self._inflight = [x for x in self._inflight if x is not b]
+
+    def _requeue(self, records: list[Record], batches: list[list[Record]]) -> None:
+        """``records`` (what is left of ``batches``) back at the head of the queue, retried first."""
+        with self._lock:
+            held = [x for x in self._inflight if any(x is b for b in batches)]
+            self._inflight = [x for x in self._inflight if not any(x is b for b in batches)]
+            if not self._abandoned and len(held) == len(batches):  # else spooled already (stop, hurry)
+                self._queue.extendleft(reversed(records))
+
+    def _write_isolating(self, batch: list[Record], encoded: _Ahead | _Given | None = None,
+                         ahead: _Ahead | None = None, process: BatchProcess | None = None, *,
+                         requeue: bool = True) -> None:
         """Write ``batch`` (``encoded``: its payloads, encoded ahead; ``process``: by it); records the
         database refuses for their data are isolated by halving (log2(n) extra transactions per
         refused record) and given up on, the others written. Any other error puts every record
         not yet written back at the head of the queue, followed by ``ahead``'s (the next batch,
-        taken and being encoded while this one is written)."""
+        taken and being encoded while this one is written); ``requeue`` False (records forwarded from
+        the spool, which keeps them until they are in): nothing is put back."""
         todo: list[tuple[list[Record], list[bytes] | None]] = []  # a stack, left halves on top:
         part: list[Record] = batch  # records are written in seq order
         prepared = None if encoded is None else encoded.prepared  # for the whole batch only
@@ -369,11 +654,14 @@ class HistoryWriter:
                     todo.append((part[mid:], None if payloads is None else payloads[mid:]))
                     todo.append((part[:mid], None if payloads is None else payloads[:mid]))
         except Exception:
-            left = part + [r for p, _ in reversed(todo) for r in p]
-            if ahead is not None:
-                left += ahead.batch
-            self._queue.extendleft(reversed(left))  # retried first next time
+            if requeue:
+                left = part + [r for p, _ in reversed(todo) for r in p]
+                if ahead is not None:
+                    left += ahead.batch
+                self._requeue(left, [batch] if ahead is None else [batch, ahead.batch])  # retried first
             raise
+        if requeue:
+            self._done(batch)
 
     def _refuse(self, rec: Record, e: Exception) -> None:
         self.failed_records += 1
@@ -407,8 +695,9 @@ class HistoryWriter:
         # (this one and the next, encoded ahead), so moving the reservation when less
         # than RESERVE/2 + 2 batches is left keeps it (batch_max up to RESERVE/4, as
         # the default; larger ones move it every batch); one UPDATE per ~450k records.
-        reserve = {thing: top + RESERVE for thing, top in tops.items()
-                   if top > self._reserved[thing] - RESERVE // 2 - 2 * self.batch_max}
+        reserve = {thing: top + RESERVE for thing, top in tops.items()  # (a Thing of a previous run,
+                   if thing in self._reserved  # forwarded from the spool: its registration reserves)
+                   and top > self._reserved[thing] - RESERVE // 2 - 2 * self.batch_max}
         if process is not None:
             process.write(batch, keys, reserve)
         else:
@@ -424,14 +713,26 @@ class HistoryWriter:
 
     def _release_reservations(self) -> None:
         """After a clean stop, the next run continues right after the last committed seq."""
-        if self._queue or not self._lease.held:
+        if self._queue or self._inflight or self._spool_waiting() or not self._lease.held:
             return  # not everything was written, or not ours to change: keep the reservation
         try:
-            self.storage.release(self.committed)
+            self.storage.release({t: s for t, s in self.committed.items() if t in self._reserved})
         except Exception:
             log.exception("could not release sequence reservations (the next run skips ahead)")
         else:
             self._reserved.update(self.committed)
+
+
+class _Given:
+    """A batch's payloads encoded already (records forwarded from the spool): what ``_Ahead`` gives."""
+
+    prepared: Prepared | None = None
+
+    def __init__(self, payloads: list[bytes]) -> None:
+        self._payloads = payloads
+
+    def result(self) -> list[bytes]:
+        return self._payloads
 
 
 class _Ahead:

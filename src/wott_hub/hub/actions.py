@@ -6,16 +6,23 @@ hub Thing declares each in its TD with one POST form (``response`` in an afforda
 response media type) under ``/wot/hub/actions/<name>``. A body that is not a JSON object is a
 400; a ``WottHubError`` the callable raises is the problem+json status of ``errors.http_status``
 with its message, which names the field at fault. An empty or ``null`` body is no input (``{}``).
+
+A client that leaves while its action runs (a long export) ends it: the request's task is
+cancelled (``on_connection_close``) and a ``Stream``'s generator closed, which cancels the work
+behind it (``exports.py``); nothing is logged for it but a line at DEBUG.
 """
 
 from __future__ import annotations
 
+import asyncio
 import copy
 import json
-from collections.abc import AsyncIterator, Mapping
+import logging
+from collections.abc import AsyncGenerator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import tornado.iostream
 import tornado.web
 
 from wott_hub.errors import InvalidInput, WottHubError, http_status
@@ -28,6 +35,8 @@ if TYPE_CHECKING:
 
 __all__ = ["ActionHandler", "Stream", "Table", "install"]
 
+log = logging.getLogger(__name__)
+
 Table = Mapping[str, tuple[dict[str, Any], Invoke]]
 """An action's name -> its affordance and its ``Invoke``."""
 
@@ -37,7 +46,7 @@ class Stream:
     """An output too large for one JSON document (records, an MCAP file): sent as it comes."""
 
     content_type: str
-    chunks: AsyncIterator[bytes | str]
+    chunks: AsyncGenerator[bytes | str, None]
 
 
 def install(td: dict[str, Any], server: HubServer, table: Table) -> None:
@@ -62,6 +71,14 @@ class ActionHandler(BaseHandler):
 
     def initialize(self, invoke: Invoke) -> None:
         self.invoke = invoke
+        self._task: asyncio.Task[Any] | None = None
+        self._left = False
+
+    def on_connection_close(self) -> None:
+        """The client left before the answer was complete: the action's work ends with it."""
+        self._left = True
+        if self._task is not None and not self._task.done():
+            self._task.cancel()
 
     def options(self, *_args: Any, **_kwargs: Any) -> None:
         self.set_header("Access-Control-Allow-Methods", "POST, OPTIONS")
@@ -69,18 +86,39 @@ class ActionHandler(BaseHandler):
         self.set_status(204)
 
     async def post(self, **groups: str) -> None:
+        self._task = asyncio.current_task()
         try:
             out = await self.invoke(self._input(), **groups)
             if isinstance(out, Stream):
-                self.set_header("Content-Type", out.content_type)
-                async for chunk in out.chunks:
-                    self.write(chunk)
-                    await self.flush()
-                self.finish()
+                await self._stream(out)
                 return
         except WottHubError as e:
             raise tornado.web.HTTPError(http_status(e), reason=str(e)) from None
+        except tornado.iostream.StreamClosedError:
+            log.debug("%s %s: the client left", self.request.method, self.request.path)
+            return
+        except asyncio.CancelledError:
+            if not self._left:
+                raise  # the hub stopping, not the client leaving
+            log.debug("%s %s: the client left", self.request.method, self.request.path)
+            return
         self.write_json_text(json.dumps(out))
+
+    async def _stream(self, out: Stream) -> None:
+        chunks = out.chunks
+        try:
+            first = True
+            async for chunk in chunks:
+                if first:  # the first chunk is ready (or an error raised, answered as a problem)
+                    self.set_header("Content-Type", out.content_type)
+                    first = False
+                self.write(chunk)
+                await self.flush()
+            if first:
+                self.set_header("Content-Type", out.content_type)
+            self.finish()
+        finally:
+            await chunks.aclose()  # the work behind it ends now, not when the generator is collected
 
     def _input(self) -> dict[str, Any]:
         body = self.request.body.strip() if self.request.body else b""

@@ -15,17 +15,22 @@ and the answers are streams (JSON Lines, MCAP), not a property value.
 - ``historyExport``: devices' records as an MCAP file (``application/x-mcap``,
   ``history/mcap.py``), the same as ``wott-hub history export --format mcap``.
 
-Errors are problem+json with the offending field named: 400 for bad input, 404 for an
-unknown device or a hub without history (``errors.http_status``).
+Errors are problem+json with the offending field named: 400 for bad input (a JSON number
+out of range included: ``from``/``to`` as ``replay.time_field`` checks them, ``sceneHz`` in
+[0.01, 1000]), 404 for an unknown device or a hub without history (``errors.http_status``), 503
+when ``exports.MAX_EXPORTS`` exports run already.
+
+Reads run in threads of their own (``exports.py``): pages in a small pool, each export in a
+thread of its own, streamed, cancelled when its client leaves or the hub stops; the event loop's
+default executor (which devices use) is never theirs. ``historyExport`` needs the ``control``
+scope, though it is ``safe``: it costs a thread and a core (``security.policy.CONTROL_ACTIONS``).
 """
 
 from __future__ import annotations
 
-import asyncio
 import functools
 import math
-import tempfile
-from collections.abc import AsyncIterator
+from collections.abc import AsyncGenerator
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.errors import InvalidInput, NotFound
@@ -35,14 +40,18 @@ from .actions import install as install_actions
 from .replay import TIME_TEXT, time_field
 
 if TYPE_CHECKING:
+    from typing import IO
+
     from wott_hub.history import HistoryReader
     from wott_hub.servient.server import HubServer
 
+    from .exports import Export
     from .recording import HubHistory
 
-__all__ = ["ACTIONS", "MAX_LIMIT", "install"]
+__all__ = ["ACTIONS", "MAX_LIMIT", "MAX_SCENE_HZ", "MIN_SCENE_HZ", "install"]
 
 MAX_LIMIT = 100_000
+MIN_SCENE_HZ, MAX_SCENE_HZ = 0.01, 1000.0
 JSONL = "application/x-ndjson"
 MCAP = "application/x-mcap"
 
@@ -103,7 +112,7 @@ ACTIONS: dict[str, dict[str, Any]] = {
                 **_RANGE,
                 "scene": {"type": "boolean", "default": True,
                           "description": "Foxglove scene channels (mesh and deformation)."},
-                "sceneHz": {"type": "number", "exclusiveMinimum": 0, "default": 30,
+                "sceneHz": {"type": "number", "minimum": MIN_SCENE_HZ, "maximum": MAX_SCENE_HZ, "default": 30,
                             "description": "Deformation scenes per second at most."},
             },
             "required": ["devices"],
@@ -145,7 +154,7 @@ def _reader(history: HubHistory) -> HistoryReader:
 
 
 async def _devices(history: HubHistory, x: dict[str, Any]) -> list[dict[str, Any]]:
-    things = await asyncio.to_thread(_reader(history).things)
+    things = await history.exports.read(_reader(history).things)
     out = []
     for t in things:
         d: dict[str, Any] = {"id": t.id, "title": t.title, "family": t.family, "count": t.count}
@@ -169,11 +178,11 @@ async def _records(history: HubHistory, x: dict[str, Any]) -> Stream:
     limit = _int(x.get("limit"), "limit", 1000, 1, MAX_LIMIT)
     reader = _reader(history)
 
-    async def pages(after: int) -> AsyncIterator[str]:
+    async def pages(after: int) -> AsyncGenerator[str, None]:
         left = limit
         while left > 0:
-            records = await asyncio.to_thread(reader.record_page, device, t_from_ns=lo, t_to_ns=hi,
-                                              names=names, after=after, limit=min(left, 5000))
+            records = await history.exports.read(reader.record_page, device, t_from_ns=lo, t_to_ns=hi,
+                                                 names=names, after=after, limit=min(left, 5000))
             if not records:
                 break
             yield jsonl(records)
@@ -197,19 +206,16 @@ async def _export(history: HubHistory, x: dict[str, Any]) -> Stream:
     if not isinstance(scene, bool):
         raise InvalidInput(f"'scene' must be true or false, got {scene!r}")
     hz = x.get("sceneHz", 30)
-    if isinstance(hz, bool) or not isinstance(hz, int | float) or not (math.isfinite(hz) and hz > 0):
-        raise InvalidInput(f"'sceneHz' must be a number > 0, got {hz!r}")
+    number = isinstance(hz, int | float) and not isinstance(hz, bool)
+    if not (number and math.isfinite(hz) and MIN_SCENE_HZ <= hz <= MAX_SCENE_HZ):
+        raise InvalidInput(f"'sceneHz' must be a number in [{MIN_SCENE_HZ:g}, {MAX_SCENE_HZ:g}], got {hz!r}")
     reader = _reader(history)
 
-    async def chunks() -> AsyncIterator[bytes]:
-        with tempfile.TemporaryFile() as f:  # the writer seeks nowhere, but its summary comes last
-            await asyncio.to_thread(export_mcap, reader, f, devices, t_from_ns=lo, t_to_ns=hi, names=names,
-                                    scene=scene, scene_hz=float(hz))
-            f.seek(0)
-            while chunk := await asyncio.to_thread(f.read, 1 << 20):
-                yield chunk
+    def write(out: IO[bytes], job: Export) -> None:
+        export_mcap(reader, out, devices, t_from_ns=lo, t_to_ns=hi, names=names, scene=scene,
+                    scene_hz=float(hz), check=job.check)
 
-    return Stream(MCAP, chunks())
+    return Stream(MCAP, history.exports.stream(write))  # Busy (503) when as many run as allowed
 
 
 _INVOKES = {"historyDevices": _devices, "historyRecords": _records, "historyExport": _export}

@@ -137,6 +137,12 @@ class Hub:
         await self._history.close()
         self.state = "stopped"
 
+    def hurry(self) -> None:
+        """Let the stop under way end without waiting for the database (a second Ctrl-C: ``serve``):
+        history spools what it cannot write at once, exports are cancelled; every step of ``stop``
+        still runs, in order."""
+        self._history.hurry()
+
     def _start_mqtt(self) -> None:
         """Every TD gets MQTT forms from now on and every served Thing a tap (wott_hub.mqtt)."""
         from dataclasses import replace

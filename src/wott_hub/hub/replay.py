@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from wott_hub.errors import Conflict, InvalidInput, NotFound, WottHubError
 from wott_hub.events.record import KIND_PROPERTY, Record
-from wott_hub.history.times import parse_time
+from wott_hub.history.times import MAX_NS, parse_time
 from wott_hub.runtime.pipeline import CONTACTS, NO_CONTACTS, NO_UNAVAILABLE, UNAVAILABLE
 from wott_hub.servient import ServedThing, with_forms
 
@@ -37,7 +37,14 @@ if TYPE_CHECKING:
     from .recording import HubHistory
     from .things import Things
 
-__all__ = ["ACTIONS", "TIME_TEXT", "ReplayRuntime", "Replays", "time_field"]
+__all__ = ["ACTIONS", "MAX_OFFSET_S", "MAX_SPEED", "MIN_SPEED", "TIME_TEXT", "ReplayRuntime", "Replays",
+           "time_field"]
+
+MAX_OFFSET_S = MAX_NS / 1e9
+"""An offset past this many seconds is past anything history can hold (2262)."""
+MIN_SPEED, MAX_SPEED = 1e-6, 1e6
+"""A speed other than 0 (as fast as possible) lies in [MIN_SPEED, MAX_SPEED]: below, a record would be
+due after the year 2262 (an infinite wait); above, it is as fast as possible anyway."""
 
 TIME_TEXT = ("ISO 8601 (local unless it has an offset or Z), relative to now ('-30s', '-10m'), 'now', "
               "or a number as text: seconds since the epoch, nanoseconds when larger than 1e14 "
@@ -60,8 +67,9 @@ ACTIONS: dict[str, dict[str, Any]] = {
                 "from": {**_TIME, "description": "Start of the range (default: the first record). "
                                                  + TIME_TEXT},
                 "to": {**_TIME, "description": "End of the range (default: the last record). " + TIME_TEXT},
-                "speed": {"type": "number", "minimum": 0, "default": 1.0,
-                          "description": "Time scale: 2 plays twice as fast; 0 as fast as possible."},
+                "speed": {"type": "number", "minimum": 0, "maximum": MAX_SPEED, "default": 1.0,
+                          "description": "Time scale: 2 plays twice as fast; 0 as fast as possible; else "
+                                         f"at least {MIN_SPEED:g}."},
                 "loop": {"type": "boolean", "default": False, "description": "Start again after the end."},
                 "withDevices": {"type": "array", "items": {"type": "string"},
                                 "description": "More recorded device ids replayed together with 'device' on "
@@ -69,7 +77,7 @@ ACTIONS: dict[str, dict[str, Any]] = {
                 "names": {"type": "array", "items": {"type": "string"},
                           "description": "Only these affordances (event or property names), like a topic "
                                          "filter; absent or empty: all."},
-                "offset": {"type": "number", "minimum": 0, "default": 0,
+                "offset": {"type": "number", "minimum": 0, "maximum": MAX_OFFSET_S, "default": 0,
                            "description": "Start this many seconds into the range (each loop starts there)."},
             },
             "required": ["device"],
@@ -225,8 +233,9 @@ class Replays:
         if not isinstance(device, str) or not device:
             raise InvalidInput("'device' (a recorded device id) is required")
         number = isinstance(speed, int | float) and not isinstance(speed, bool)
-        if not (number and math.isfinite(speed) and speed >= 0):
-            raise InvalidInput(f"'speed' must be a number >= 0, got {speed!r}")
+        if not (number and math.isfinite(speed) and (speed == 0 or MIN_SPEED <= speed <= MAX_SPEED)):
+            raise InvalidInput(f"'speed' must be 0 (as fast as possible) or a number in [{MIN_SPEED:g}, "
+                               f"{MAX_SPEED:g}], got {speed!r}")
         if not isinstance(loop, bool):
             raise InvalidInput(f"'loop' must be true or false, got {loop!r}")
         lo, hi = time_field(t_from, "from"), time_field(t_to, "to")
@@ -235,8 +244,9 @@ class Replays:
         more = _strings(with_devices, "withDevices")
         only = _strings(names, "names")
         number = isinstance(offset, int | float) and not isinstance(offset, bool)
-        if not (number and math.isfinite(offset) and offset >= 0):
-            raise InvalidInput(f"'offset' must be a number of seconds >= 0, got {offset!r}")
+        if not (number and math.isfinite(offset) and 0 <= offset <= MAX_OFFSET_S):
+            raise InvalidInput(f"'offset' must be a number of seconds in [0, {MAX_OFFSET_S:.4g}], "
+                               f"got {offset!r}")
         tid = f"replay-{device}"
         for d in (device, *more):
             await self.stop(f"replay-{d}")
@@ -300,13 +310,25 @@ def _strings(value: Any, name: str) -> list[str]:
 
 
 def time_field(value: Any, field: str) -> int | None:
-    """A time input field in ns (None: absent); ``InvalidInput`` naming ``field``."""
+    """A time input field in ns (None: absent); ``InvalidInput`` naming ``field``. A JSON number is
+    checked as its text would be (``parse_time``): seconds, or ns above 1e14, within 1970-2262 (what
+    history's 64-bit column holds): ``1e300``, ``-1e300``, ``1e20`` are 400s, never an overflow."""
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, str | int | float):
         raise InvalidInput(f"'{field}' must be a string or a number, got {value!r}")
-    if isinstance(value, int | float):
-        if not math.isfinite(value):
-            raise InvalidInput(f"'{field}' must be finite")
-        return int(value) if value > 1e14 else int(value * 1e9)
-    return parse_time(value)
+    if isinstance(value, str):
+        try:
+            return parse_time(value)
+        except InvalidInput as e:
+            raise InvalidInput(f"'{field}': {e}") from None
+    if isinstance(value, float) and not math.isfinite(value):
+        raise InvalidInput(f"'{field}' must be finite")
+    if isinstance(value, int):  # exact, whatever its size (10**400 * 1e9 would overflow a float)
+        ns: int | float = value if value > 10**14 else value * 10**9
+    else:
+        ns = value if value > 1e14 else value * 1e9  # no OverflowError: at worst inf
+    if not 0 <= ns <= MAX_NS:
+        raise InvalidInput(f"'{field}' is out of range: {value!r} (seconds, or ns above 1e14, between "
+                           "1970-01-01 and 2262-04-11)")
+    return int(ns)

@@ -12,6 +12,10 @@ The output transform restricts CORS to the configured origins off loopback (ever
 handler's ``Access-Control-Allow-Origin: *`` is rewritten here, not in each
 handler), lets preflights allow ``Authorization``, and records in the audit trail
 every request that is not a read, with the status it got, and every refusal.
+
+The access log (``log_request``) leaves out the query (it may hold ``access_token``), cuts
+the path to ``audit.MAX_TARGET`` characters, and logs answers >= 400 (which anyone can
+provoke) at most ``ERROR_LINES`` a minute (``LogRate``): the log stays bounded under a flood.
 """
 
 from __future__ import annotations
@@ -24,12 +28,15 @@ import tornado.web
 from tornado import httputil
 from tornado.log import access_log
 
-from .audit import AuditLog
+from .audit import AuditLog, clip
+from .lograte import LogRate
 from .policy import _DIRECTORY, QUERY_PARAM, AccessPolicy, Decision
 
 __all__ = ["GuardedApplication", "guard"]
 
 _UNAUDITED = frozenset({"GET", "HEAD", "OPTIONS"})
+ERROR_LINES = 20
+"""Access-log lines of answers >= 400 per minute at most (then one line counts the rest)."""
 _SCRUB = re.compile(r"[?#].*$")
 
 
@@ -83,6 +90,7 @@ class GuardedApplication(tornado.web.Application):
 
     policy: AccessPolicy | None = None
     audit: AuditLog | None = None
+    error_log_rate: LogRate | None = None
 
     def find_handler(self, request: httputil.HTTPServerRequest,
                      **kwargs: Any) -> tornado.web._HandlerDelegate:
@@ -107,8 +115,13 @@ class GuardedApplication(tornado.web.Application):
         status = handler.get_status()
         log_method = access_log.info if status < 400 else (
             access_log.warning if status < 500 else access_log.error)
+        if status >= 400:
+            if self.error_log_rate is None:
+                self.error_log_rate = LogRate(access_log, ERROR_LINES, 60.0, "answers >= 400")
+            if not self.error_log_rate.allow():
+                return
         req = handler.request
-        log_method("%d %s %s (%s) %.2fms", status, req.method, req.path, req.remote_ip,
+        log_method("%d %s %s (%s) %.2fms", status, req.method, clip(req.path), req.remote_ip,
                    1000.0 * req.request_time())
 
 

@@ -31,7 +31,8 @@ from urllib.parse import urlsplit
 from .scopes import Scope
 from .tokens import StoredToken, TokenStore
 
-__all__ = ["BEARER", "BEARER_EITHER", "BEARER_QUERY", "AccessPolicy", "Decision", "Principal", "allows"]
+__all__ = ["BEARER", "BEARER_EITHER", "BEARER_QUERY", "CONTROL_ACTIONS", "AccessPolicy", "Decision",
+           "Principal", "allows"]
 
 BEARER = "bearer_sc"
 BEARER_QUERY = "bearer_query_sc"
@@ -45,6 +46,9 @@ _PUBLIC = re.compile(r"^/(?:healthz|contexts/[^/]+|twin(?:/[A-Za-z0-9_.-]+)?/?|t
                      r"|favicon\.ico)?$")
 ADMIN_ACTIONS = frozenset({"addDevice", "removeDevice", "restartDevice"})
 """Actions that manage the fleet (the hub Thing's, hub/management.py): ``admin``."""
+CONTROL_ACTIONS = frozenset({"historyExport"})
+"""Actions that are ``safe`` (they change nothing) but cost the hub a thread and a core for as long as
+they run (hub/exports.py): ``control``, not ``read``."""
 _DIRECTORY = re.compile(r"^(?:/things(?:/.*)?|/search/.*|/events(?:/.*)?|/\.well-known/wot)$")
 
 
@@ -102,7 +106,8 @@ class AccessPolicy:
 
     def required(self, method: str, path: str) -> Scope | None:
         """The scope ``method path`` needs; None: public. An action declared ``safe`` in its TD
-        (the history API's queries) needs ``read``; a fleet action ``admin``; any other ``control``."""
+        (the history API's queries) needs ``read``, unless it is costly (``CONTROL_ACTIONS``); a
+        fleet action ``admin``; any other ``control``."""
         if method == "OPTIONS":
             return None
         if method in _SAFE:
@@ -160,8 +165,8 @@ class AccessPolicy:
         td["securityDefinitions"] = self.security_definitions()
         td["security"] = [BEARER] if self.enforced else [NOSEC]
         for name, aff in (td.get("actions") or {}).items():
-            scope = (Scope.ADMIN if name in ADMIN_ACTIONS else Scope.READ if aff.get("safe") is True
-                     else Scope.CONTROL)
+            scope = (Scope.ADMIN if name in ADMIN_ACTIONS else
+                     Scope.READ if aff.get("safe") is True and name not in CONTROL_ACTIONS else Scope.CONTROL)
             for form in aff.get("forms") or ():
                 if isinstance(form.get("href"), str):
                     self.action_scopes[urlsplit(form["href"]).path] = scope
