@@ -37,6 +37,7 @@ from urllib.parse import urljoin, urlsplit
 
 from tornado.httpclient import AsyncHTTPClient, HTTPClientError, HTTPRequest
 from tornado.httputil import HTTPInputError
+from tornado.simple_httpclient import HTTPStreamClosedError
 from wott_directory.client import DirectoryClient, ProblemError
 
 from wott_hub.td.media import TD_ACCEPT
@@ -116,8 +117,9 @@ class Explorer:
                           follow_redirects=True)
         try:
             resp = await self._http.fetch(req)
-        except HTTPInputError as e:  # longer than max_td_bytes (tornado stops reading), or malformed
-            raise ValueError(f"{url}: not read: {e} (at most {self.max_td_bytes} bytes)") from None
+        except (HTTPInputError, HTTPStreamClosedError) as e:  # past max_td_bytes tornado stops reading
+            raise ValueError(f"{url}: not read to its end ({e}): a TD longer than {self.max_td_bytes} bytes "
+                             "(max_td_bytes) is refused") from None
         body = resp.body
         big = len(body) > _PARSE_ON_LOOP_BYTES
         td = await asyncio.to_thread(json.loads, body) if big else json.loads(body)

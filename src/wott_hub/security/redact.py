@@ -30,7 +30,7 @@ REDACTED = "[redacted]"
 
 _TOKEN = re.compile(r"\b(wott_[0-9A-Fa-f]{8}_)[A-Za-z0-9_\-]+")
 _QUERY = re.compile(r"((?:\baccess_token|%61ccess_token)(?:=|%3D))[^&\s\"'<>#]+", re.IGNORECASE)
-_BEARER = re.compile(r"(\bBearer\s+)[A-Za-z0-9._~+/\-]+=*", re.IGNORECASE)
+_BEARER = re.compile(r"(\bBearer\s+)[A-Za-z0-9._~+/\-]{16,}=*", re.IGNORECASE)  # not "Bearer realm"
 _HINT = re.compile(r"wott_|access_token|%61ccess|bearer", re.IGNORECASE)
 
 _installed = False
