@@ -57,7 +57,6 @@ def test_scene_file_and_overrides(registry, tmp_path):
 @pytest.mark.parametrize(("settings", "message"), [
     ({}, "setting 'scene': needs one of 'scene' or 'step'"),
     ({"scene": "x.toml", "step": STEPS}, "setting 'scene': give only one of 'scene' or 'step'"),
-    ({"scene": "/no/such/scene.toml"}, "setting 'scene': /no/such/scene.toml: [Errno 2]"),
     ({"step": [{"kind": "poke", "at": [0, 0, 0]}]}, "setting 'scene': device 'b' step: step[0].kind: 'poke'"),
     ({"step": STEPS, "material": "rubber"}, "setting 'material': 'rubber' is not one of"),
     ({"step": STEPS, "rate_hz": 0}, "setting 'rate_hz': 0 is less than or equal to the minimum of 0"),
@@ -66,3 +65,17 @@ def test_bad_scene_settings_name_the_field(registry, settings, message):
     with pytest.raises(DriverError) as e:
         registry.open_device(DeviceConfig("b", "scene", settings))
     assert str(e.value).startswith(f"device 'b' (family 'scene'): {message}")
+
+
+def test_a_scene_file_is_read_when_the_device_opens_and_its_errors_name_the_setting(registry, tmp_path):
+    from wott_hub.runtime.opening import open_driver
+
+    missing = DeviceConfig("b", "scene", {"scene": "/no/such/scene.toml"})
+    with pytest.raises(DriverError) as e:
+        asyncio.run(open_driver(missing, registry))  # read by prepare(), off the event loop
+    assert str(e.value) == ("device 'b' (family 'scene'): setting 'scene': /no/such/scene.toml: "
+                            "No such file or directory")
+    path = tmp_path / "s.toml"
+    path.write_text('[scene]\nname = "s"\n[[step]]\nkind = "press"\nat = [0.0, 0.0, 0.0]\n')
+    driver = asyncio.run(open_driver(DeviceConfig("b", "scene", {"scene": str(path)}), registry))
+    assert driver.scene.name == "s"

@@ -38,6 +38,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--page-size", type=int, default=DirectorySettings.page_size)
     p.add_argument("--max-body", type=int, default=DirectorySettings.max_body_bytes,
                    help="largest accepted TD in bytes")
+    p.add_argument("--max-store", type=int, default=DirectorySettings.max_store_bytes,
+                   help="stored TDs in total, bytes of JSON (clients' writes beyond: 413)")
+    p.add_argument("--max-events", type=int, default=DirectorySettings.max_event_bytes,
+                   help="past events kept for Last-Event-ID replay, bytes of JSON")
     p.add_argument("--purge-interval", type=float, default=DirectorySettings.purge_interval)
     p.add_argument("--no-freeze-gc", action="store_true",
                    help="keep TDs under the cyclic GC (slower, long pauses with many TDs)")
@@ -52,6 +56,7 @@ def settings_from_args(args: argparse.Namespace) -> DirectorySettings:
     return DirectorySettings(title=args.title, token=token, open_writes=args.open,
                              protect_reads=args.protect_reads, page_size=args.page_size,
                              max_body_bytes=args.max_body, purge_interval=args.purge_interval,
+                             max_store_bytes=args.max_store, max_event_bytes=args.max_events,
                              freeze_gc=not args.no_freeze_gc)
 
 

@@ -16,6 +16,18 @@ handlers pass) to its id are refused with 403, token or not. The mark lives in
 memory: an embedder that re-registers its Things before it lets HTTP requests
 through (the hub does: its router holds requests until then) needs no more.
 
+Budgets in bytes, not only counts (docs/reliability.md): the stored TDs together at
+most ``max_store_bytes`` of JSON (a client's write that would pass it is refused with
+413, the embedder's own TDs always pass); one TD, a merge patch's result included, at
+most ``max_body_bytes`` (413); the replay log at most ``max_event_bytes`` of event data
+(``events.EventHub``), the database trimmed to what it keeps.
+
+Every write's work that grows with the TD (validation, the merge patch, the
+registration, the diff for ``thing_updated``, measuring it) runs on a thread of its
+own, so a 2 MiB TD or one with 40,000 properties holds up no read; at most
+``MAX_PENDING_WRITES`` wait for that thread, more get 503 at once. Bodies over
+``PARSE_ON_LOOP_BYTES`` are parsed there too (``parse_body``).
+
 Search runs on one thread of its own with a time budget counted from the
 request (see ``search.py``); at most ``MAX_PENDING_SEARCHES`` wait for it, more
 get 503 at once. TDs stored before the depth limit existed and deeper than it
@@ -29,12 +41,14 @@ import asyncio
 import bisect
 import gc
 import heapq
+import json
 import logging
 import secrets
 import time
 import uuid
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, TypeVar
 
@@ -48,9 +62,9 @@ from .search import SearchEngine, SearchTimedOut
 from .selftd import directory_td
 from .settings import DirectorySettings
 from .store import ThingStore
-from .validation import MAX_TD_DEPTH, check_depth, check_td, json_depth
+from .validation import MAX_TD_DEPTH, check_depth, check_td, json_depth, parse_json_body
 
-__all__ = ["Directory"]
+__all__ = ["MAX_PENDING_WRITES", "PARSE_ON_LOOP_BYTES", "Directory"]
 
 log = logging.getLogger("wott_directory")
 
@@ -58,6 +72,32 @@ _R = TypeVar("_R")
 
 MAX_PENDING_SEARCHES = 16
 """Searches queued for the search thread; past that a search gets 503 at once."""
+MAX_PENDING_WRITES = 16
+"""Writes queued for the write thread; past that a write gets 503 at once."""
+PARSE_ON_LOOP_BYTES = 64 * 1024
+"""Bodies up to this are parsed on the IOLoop (sub-millisecond); larger ones on the write thread."""
+
+
+def _json_bytes(doc: Any) -> int:
+    return len(json.dumps(doc, ensure_ascii=False, separators=(",", ":")).encode("utf-8"))
+
+
+class StoreFull(DirectoryError):
+    """A write that would take the stored TDs past ``max_store_bytes`` (413, naming the budget)."""
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(413, detail)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """What a write will store and publish, worked out on the write thread."""
+
+    rec: Enriched
+    size: int  # bytes of the stored TD's JSON
+    event: str | None  # "thing_created" | "thing_updated" | None (a refresh)
+    data: dict[str, Any] | None  # the event's data: the TD, or the diff with the id
+    data_size: int
 
 
 class Directory:
@@ -73,8 +113,11 @@ class Directory:
         self.td_security = td_security
         self.store = ThingStore(engine, create_tables=create_tables)
         self.search_engine = SearchEngine(max_length=self.settings.max_query_length)
-        self.events = EventHub(self.settings.event_retention, self.settings.sse_queue)
+        self.events = EventHub(self.settings.event_retention, self.settings.sse_queue,
+                               self.settings.max_event_bytes)
         self._things: dict[str, Enriched] = {}
+        self._sizes: dict[str, int] = {}  # bytes of each stored TD's JSON
+        self.stored_bytes = 0
         self._anonymous: set[str] = set()
         self._own: set[str] = set()
         self._held: set[str] = set()
@@ -90,6 +133,8 @@ class Directory:
         self._writes_since_freeze = 0
         self._purge_task: asyncio.Task[None] | None = None
         self._search_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wott-directory-search")
+        self._write_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wott-directory-write")
+        self._pending_writes = 0
         self.started = False
 
     # -- life cycle ------------------------------------------------------------
@@ -99,6 +144,8 @@ class Directory:
         for t in things:
             rec = Enriched.from_stored(t.td)
             self._things[t.id] = rec
+            self._sizes[t.id] = t.size
+            self.stored_bytes += t.size
             if t.anonymous:
                 self._anonymous.add(t.id)
             if t.own:
@@ -115,6 +162,7 @@ class Directory:
                         ", ".join(sorted(self._unsearchable)[:10]))
         self.events.restore(events)
         self._trimmed_to = max(0, self.events.last_id - self.settings.event_retention)
+        await self._trim_events()  # a smaller max_event_bytes than the last run's
         self._writes_since_freeze = 0
         if self.settings.freeze_gc:
             gc.freeze()
@@ -134,6 +182,7 @@ class Directory:
                 pass
             self._purge_task = None
         self._search_executor.shutdown(wait=True)
+        self._write_executor.shutdown(wait=True)
         await self.store.close()
         self.started = False
 
@@ -227,6 +276,24 @@ class Directory:
             self._pending_searches -= 1
 
     # -- writes ----------------------------------------------------------------
+    async def _on_write_thread(self, fn: Callable[..., _R], *args: Any, remote: bool = True) -> _R:
+        """``fn(*args)`` on the write thread; for a client (``remote``), 503 at once when
+        ``MAX_PENDING_WRITES`` already wait (the embedder's own writes always wait their turn)."""
+        if remote and self._pending_writes >= MAX_PENDING_WRITES:
+            raise DirectoryError(503, f"{MAX_PENDING_WRITES} writes are already waiting "
+                                      "(MAX_PENDING_WRITES); try again shortly", [], {"Retry-After": "1"})
+        self._pending_writes += 1
+        try:
+            return await asyncio.get_running_loop().run_in_executor(self._write_executor, fn, *args)
+        finally:
+            self._pending_writes -= 1
+
+    async def parse_body(self, body: bytes) -> Any:
+        """A request body as JSON (400 naming where it broke); a large one parsed on the write thread."""
+        if len(body) <= PARSE_ON_LOOP_BYTES:
+            return parse_json_body(body)
+        return await self._on_write_thread(parse_json_body, body)
+
     async def put(self, thing_id: str, td: Any, *, remote: bool = False) -> bool:
         """Create or replace the TD ``thing_id`` (PUT); True if it was created. ``remote``: an HTTP
         client's write, refused on held ids; otherwise the embedder's, and the id becomes held."""
@@ -240,10 +307,11 @@ class Directory:
                                      f"{td['id']!r} does not match the id in the URL ({thing_id!r})"}])
         self._check_not_own(thing_id)
         self._check_not_held(thing_id, remote)
-        check_td(td)
+        await self._on_write_thread(check_td, td, remote=remote)
         async with self._lock:
             self._check_not_held(thing_id, remote)  # the embedder may have put it meanwhile
-            created = await self._put_locked(thing_id, td, anonymous=thing_id in self._anonymous)
+            anonymous = thing_id in self._anonymous
+            created = await self._put_locked(thing_id, td, anonymous=anonymous, remote=remote)
             if not remote:
                 self._held.add(thing_id)
             return created
@@ -264,15 +332,17 @@ class Directory:
                 with_id["id"] = thing_id
         if "id" not in with_id:
             with_id = {"id": thing_id, **with_id}
-        check_td(with_id)
+        await self._on_write_thread(check_td, with_id, remote=remote)
         async with self._lock:
-            await self._put_locked(thing_id, with_id, anonymous=True)
+            await self._put_locked(thing_id, with_id, anonymous=True, remote=remote)
             if not remote:
                 self._held.add(thing_id)
         return thing_id
 
     async def patch(self, thing_id: str, patch: Any, *, remote: bool = False) -> None:
-        """Apply a JSON merge patch, then validate the result as a whole TD (``remote`` as for ``put``)."""
+        """Apply a JSON merge patch, then validate the result as a whole TD (``remote`` as for ``put``);
+        a result larger than ``max_body_bytes`` is refused (413): patches cannot grow a TD past what
+        a PUT may send."""
         if not isinstance(patch, dict):
             raise BadRequest("A merge patch of a TD must be a JSON object (a Partial TD)")
         check_depth(patch, "The merge patch")  # applying it recurses as deep as it nests
@@ -282,12 +352,21 @@ class Directory:
             if prev is None:
                 raise NotFound(f"No TD with id {thing_id!r}")
             self._check_not_held(thing_id, remote)
-            candidate = apply_merge_patch(prev.td, patch)
-            if candidate.get("id") != thing_id:
-                raise ValidationFailed([{"field": "$.id",
-                                         "description": "the id of a TD cannot be changed or removed"}])
-            check_td(candidate)
-            await self._put_locked(thing_id, candidate, anonymous=thing_id in self._anonymous)
+            candidate = await self._on_write_thread(self._patched, thing_id, prev.td, patch, remote=remote)
+            await self._put_locked(thing_id, candidate, anonymous=thing_id in self._anonymous, remote=remote)
+
+    def _patched(self, thing_id: str, td: dict[str, Any], patch: dict[str, Any]) -> dict[str, Any]:
+        """The patched TD, checked (on the write thread)."""
+        candidate = apply_merge_patch(td, patch)
+        if candidate.get("id") != thing_id:
+            raise ValidationFailed([{"field": "$.id",
+                                     "description": "the id of a TD cannot be changed or removed"}])
+        size = _json_bytes({k: v for k, v in candidate.items() if k != "registration"})
+        limit = self.settings.max_body_bytes
+        if size > limit:
+            raise DirectoryError(413, f"The patched TD would be {size} bytes, more than the {limit} a TD may "
+                                      "have (max_body_bytes)")
+        return check_td(candidate)
 
     async def delete(self, thing_id: str, *, remote: bool = False) -> None:
         self._check_not_own(thing_id)
@@ -306,25 +385,40 @@ class Directory:
             raise Forbidden(f"The TD {thing_id!r} is registered by the application serving this directory "
                             "(the hub) and only it can change or delete it")
 
-    async def _put_locked(self, thing_id: str, td: dict[str, Any], anonymous: bool) -> bool:
-        prev = self._things.get(thing_id)
-        now = datetime.now(UTC)
+    @staticmethod
+    def _plan(thing_id: str, td: dict[str, Any], prev: Enriched | None, now: datetime) -> _Plan:
+        """The enriched TD, its size and its event (on the write thread: all of it grows with the TD)."""
         rec = enrich(td, now, prev)
-        event: Event | None = None
         if prev is not None and same_content(prev.td, rec.td):
             reg = {**rec.td["registration"], "modified": iso(prev.modified)}
             rec = Enriched({**rec.td, "registration": reg}, prev.created, prev.modified, rec.expires)
-        elif prev is not None:
-            event = Event(self.events.next_id(), "thing_updated", thing_id,
-                          {"id": thing_id, **merge_diff(prev.td, rec.td)})
-        else:
-            event = Event(self.events.next_id(), "thing_created", thing_id, rec.td)
+            return _Plan(rec, _json_bytes(rec.td), None, None, 0)
+        size = _json_bytes(rec.td)
+        if prev is None:
+            return _Plan(rec, size, "thing_created", rec.td, size)
+        diff = {"id": thing_id, **merge_diff(prev.td, rec.td)}
+        return _Plan(rec, size, "thing_updated", diff, _json_bytes(diff))
+
+    async def _put_locked(self, thing_id: str, td: dict[str, Any], anonymous: bool,
+                          remote: bool = False) -> bool:
+        prev = self._things.get(thing_id)
+        plan = await self._on_write_thread(self._plan, thing_id, td, prev, datetime.now(UTC), remote=False)
+        rec = plan.rec
+        old_size = self._sizes.get(thing_id, 0)
+        budget = self.settings.max_store_bytes
+        if remote and plan.size > old_size and self.stored_bytes - old_size + plan.size > budget:
+            raise StoreFull(f"The directory's storage budget is full: {self.stored_bytes} of {budget} bytes "
+                            f"of TDs stored (max_store_bytes), this TD is {plan.size}; delete TDs first")
+        event = (Event(self.events.next_id(), plan.event, thing_id, plan.data, plan.data_size)
+                 if plan.event is not None else None)
         row = {"id": thing_id, "td": rec.td, "anonymous": anonymous, "own": thing_id in self._own,
                "created": rec.created,
                "modified": rec.modified, "expires": rec.expires}
         await self.store.write(upserts=[row], events=[event] if event else [],
                                new_ids=[] if prev else [thing_id])
         self._things[thing_id] = rec
+        self._sizes[thing_id] = plan.size
+        self.stored_bytes += plan.size - old_size
         self._unsearchable.discard(thing_id)  # a TD written now passed the depth check
         if prev is None:
             bisect.insort(self._ids, thing_id)
@@ -341,6 +435,7 @@ class Directory:
         event = Event(self.events.next_id(), "thing_deleted", thing_id, None)
         await self.store.write(deletes=[thing_id], events=[event])
         del self._things[thing_id]
+        self.stored_bytes -= self._sizes.pop(thing_id, 0)
         self._anonymous.discard(thing_id)
         self._held.discard(thing_id)
         self._unsearchable.discard(thing_id)
@@ -379,7 +474,8 @@ class Directory:
         return purged
 
     async def _trim_events(self) -> None:
-        keep_after = self.events.last_id - self.settings.event_retention
+        """The database keeps the events the replay log keeps (count and bytes), no older one."""
+        keep_after = max(self.events.last_id - self.settings.event_retention, self.events.first_kept - 1)
         if keep_after > self._trimmed_to:
             await self.store.trim_events(keep_after)
             self._trimmed_to = keep_after

@@ -1,5 +1,9 @@
 """Lifecycle events and their fan-out to SSE subscribers, with replay for ``Last-Event-ID``.
 
+The replay log is bounded twice: ``retention`` events and ``max_bytes`` bytes of their
+data's JSON (``Event.size``: a created TD or an update's diff may be megabytes); the
+oldest events go first.
+
 Publishing happens on the event loop, synchronously: the event goes into the
 replay log and into every subscriber's queue in one step, so a subscriber that
 snapshots the log and registers in the same step can neither miss an event nor
@@ -28,6 +32,8 @@ class Event:
     thing_id: str
     data: dict[str, Any] | None = None
     """The full TD (created) or the merge patch including ``id`` (updated); None for deleted."""
+    size: int = 0
+    """Bytes of ``data``'s JSON (what the event costs the replay log's byte budget)."""
     _text: dict[bool, bytes] = field(default_factory=dict, repr=False)
 
     def payload(self, diff: bool) -> dict[str, Any]:
@@ -74,8 +80,11 @@ class Subscription:
 
 
 class EventHub:
-    def __init__(self, retention: int, queue_size: int) -> None:
-        self.log: deque[Event] = deque(maxlen=retention)
+    def __init__(self, retention: int, queue_size: int, max_bytes: int | None = None) -> None:
+        self.log: deque[Event] = deque()
+        self.retention = retention
+        self.max_bytes = max_bytes
+        self.log_bytes = 0  # sum of the logged events' ``size``
         self.subscribers: set[Subscription] = set()
         self.queue_size = queue_size
         self.last_id = 0
@@ -83,15 +92,28 @@ class EventHub:
     def restore(self, events: Iterable[Event]) -> None:
         """Events loaded from storage at start, oldest first."""
         for ev in events:
-            self.log.append(ev)
+            self._log(ev)
             self.last_id = max(self.last_id, ev.id)
 
     def next_id(self) -> int:
         self.last_id += 1
         return self.last_id
 
+    def _log(self, event: Event) -> None:
+        log = self.log
+        log.append(event)
+        self.log_bytes += event.size
+        while log and (len(log) > self.retention
+                       or (self.max_bytes is not None and self.log_bytes > self.max_bytes)):
+            self.log_bytes -= log.popleft().size
+
+    @property
+    def first_kept(self) -> int:
+        """The id of the oldest event kept (``last_id + 1`` when none is): storage keeps no older one."""
+        return self.log[0].id if self.log else self.last_id + 1
+
     def publish(self, event: Event) -> None:
-        self.log.append(event)
+        self._log(event)
         for sub in self.subscribers:
             sub.offer(event)
 

@@ -22,6 +22,7 @@ from typing import Any
 from urllib.parse import quote, urlencode
 
 from tornado.iostream import StreamClosedError
+from tornado.log import access_log, app_log, gen_log
 from tornado.web import Application, HTTPError, RequestHandler, stream_request_body
 
 from .directory import Directory
@@ -39,9 +40,8 @@ from .errors import (
 from .events import EVENT_TYPES
 from .registration import DISCOVERY_CONTEXT
 from .settings import DirectorySettings, is_loopback
-from .validation import parse_json_body
 
-__all__ = ["directory_handlers", "make_app"]
+__all__ = ["directory_handlers", "log_request", "make_app"]
 
 log = logging.getLogger("wott_directory.http")
 
@@ -156,10 +156,18 @@ class BaseHandler(RequestHandler):
         super().send_error(status_code, **kwargs)
 
     def log_exception(self, typ: Any, value: Any, tb: Any) -> None:
+        """Log lines name the path, never the query: a client may pass its token as
+        ``?access_token=`` (tornado's own lines quote the whole URI)."""
+        method, path = self.request.method, self.request.path
         if isinstance(value, DirectoryError):
-            log.info("%s %s -> %s", self.request.method, self.request.uri, value)
+            log.info("%s %s -> %s", method, path, value)
+        elif isinstance(value, HTTPError):
+            if value.log_message:
+                gen_log.warning("%d %s %s (%s): %s", value.status_code, method, path, self.request.remote_ip,
+                                value.log_message % value.args if value.args else value.log_message)
         else:
-            super().log_exception(typ, value, tb)
+            app_log.error("Uncaught exception %s %s (%s)", method, path, self.request.remote_ip,
+                          exc_info=(typ, value, tb))
 
 
 class NotFoundHandler(BaseHandler):
@@ -231,7 +239,7 @@ class _BodyHandler(BaseHandler):
         if self._refused is not None:
             raise self._refused
 
-    def json_body(self, allowed: set[str], required: bool) -> Any:
+    async def json_body(self, allowed: set[str], required: bool) -> Any:
         self.check_refused()
         if self._too_big:
             raise PayloadTooLarge(self.conf.max_body_bytes)
@@ -241,7 +249,7 @@ class _BodyHandler(BaseHandler):
         if media is not None and media not in allowed:
             raise UnsupportedMediaType(f"Content-Type {media} is not accepted here; use "
                                        f"{' or '.join(sorted(allowed))}")
-        return parse_json_body(b"".join(self._chunks))
+        return await self.directory.parse_body(b"".join(self._chunks))
 
 
 class ThingsHandler(_BodyHandler):
@@ -296,7 +304,7 @@ class ThingsHandler(_BodyHandler):
     head = get
 
     async def post(self) -> None:
-        td = self.json_body(TD_INPUT_TYPES, required=False)
+        td = await self.json_body(TD_INPUT_TYPES, required=False)
         thing_id = await self.directory.create_anonymous(td, remote=True)
         self.set_header("Location", f"{self.conf.base_url}things/{quote(thing_id, safe=':')}")
         self.finish_empty(201)
@@ -314,12 +322,12 @@ class ThingHandler(_BodyHandler):
     head = get
 
     async def put(self, thing_id: str) -> None:
-        td = self.json_body(TD_INPUT_TYPES, required=False)
+        td = await self.json_body(TD_INPUT_TYPES, required=False)
         created = await self.directory.put(thing_id, td, remote=True)
         self.finish_empty(201 if created else 204)
 
     async def patch(self, thing_id: str) -> None:
-        patch = self.json_body({MERGE_PATCH_TYPE}, required=True)
+        patch = await self.json_body({MERGE_PATCH_TYPE}, required=True)
         await self.directory.patch(thing_id, patch, remote=True)
         self.finish_empty(204)
 
@@ -479,7 +487,16 @@ def directory_handlers(directory: Directory, prefix: str = "",
     return routes
 
 
+def log_request(handler: RequestHandler) -> None:
+    """tornado's access log line with the path, not the URI: the query may hold ``access_token``."""
+    status = handler.get_status()
+    write = access_log.info if status < 400 else access_log.warning if status < 500 else access_log.error
+    req = handler.request
+    write("%d %s %s (%s) %.2fms", status, req.method, req.path, req.remote_ip, 1000.0 * req.request_time())
+
+
 def make_app(directory: Directory, prefix: str = "", **tornado_settings: Any) -> Application:
     """A tornado Application serving only the directory (unknown paths answer problem+json 404)."""
+    tornado_settings.setdefault("log_function", log_request)
     return Application(directory_handlers(directory, prefix), default_handler_class=NotFoundHandler,
                        default_handler_args={"directory": directory}, **tornado_settings)

@@ -71,6 +71,12 @@ class DirectorySettings:
         "Seconds between sweeps for expired TDs (they disappear at most this late)."))] = 1.0
     event_retention: Annotated[int, Meta(ge=0, le=10_000_000, description=(
         "How many past events are kept for Last-Event-ID replay."))] = 10_000
+    max_store_bytes: Annotated[int, Meta(ge=1024 * 1024, le=2**40, description=(
+        "Stored TDs in total, bytes of JSON; a write from a client that would pass it is refused (413). "
+        "The embedding application's own TDs always pass."))] = 128 * 1024 * 1024
+    max_event_bytes: Annotated[int, Meta(ge=0, le=2**40, description=(
+        "Past events kept for Last-Event-ID replay in total, bytes of JSON (a created TD, an update's "
+        "diff); the oldest go first, whatever event_retention allows."))] = 16 * 1024 * 1024
     sse_keepalive: Annotated[float, Meta(gt=0, le=3600, description=(
         "Seconds between keep-alive comments on an idle event stream."))] = 15.0
     sse_queue: Annotated[int, Meta(ge=1, le=10_000_000, description=(

@@ -55,6 +55,8 @@ class StoredThing:
     td: dict[str, Any]
     anonymous: bool
     own: bool = False
+    size: int = 0
+    """Characters of the stored JSON text (what the TD costs the store's byte budget)."""
 
 
 def _utc(moment: datetime | None) -> datetime | None:
@@ -88,10 +90,10 @@ class ThingStore:
                 raise RuntimeError(f"the directory's tables {', '.join(missing)} are missing from "
                                    f"{self.engine.url!r}: run the migrations that create them first")
         with self.engine.connect() as conn:
-            things = [StoredThing(r.id, json.loads(r.td), r.anonymous, r.own) for r in conn.execute(
-                select(ThingRow.id, ThingRow.td, ThingRow.anonymous, ThingRow.own))]
+            rows_td = conn.execute(select(ThingRow.id, ThingRow.td, ThingRow.anonymous, ThingRow.own))
+            things = [StoredThing(r.id, json.loads(r.td), r.anonymous, r.own, len(r.td)) for r in rows_td]
             rows = conn.execute(select(EventRow).order_by(EventRow.id.desc()).limit(event_retention)).all()
-        events = [Event(r.id, r.type, r.thing_id, json.loads(r.data) if r.data else None)
+        events = [Event(r.id, r.type, r.thing_id, json.loads(r.data) if r.data else None, len(r.data or ""))
                   for r in reversed(rows)]
         return things, events
 

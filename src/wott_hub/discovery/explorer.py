@@ -9,6 +9,15 @@ that leaves and comes back on another address, stays one Thing: ``on_found``
 once, then ``on_updated`` (new TD or address) and ``on_lost`` (gone from every
 introduction that announced it).
 
+Bounded: a TD is read up to ``max_td_bytes`` (1 MiB by default; a longer one is not
+read to its end) and parsed off the event loop when it is large.
+
+Quiet about what it cannot read: the Things other hubs announce are usually
+protected (401 without their token), and one remote hub serves dozens of them. So
+a failed fetch is a warning once per origin (``scheme://host:port``, one line per
+remote hub, naming how many of its Things were refused so far when it is read again),
+and each further failure from there is logged at debug.
+
 Each new Thing goes through the ``claim(td)`` it is given (the hub gives the plugin
 registry's ``claim``, the hook that adapts foreign TDs; none: nothing is adopted): its
 ``DeviceConfig``, or None if no plugin adopts it, travels with the ``FoundThing``. The
@@ -27,6 +36,8 @@ from typing import Any
 from urllib.parse import urljoin, urlsplit
 
 from tornado.httpclient import AsyncHTTPClient, HTTPClientError, HTTPRequest
+from tornado.httputil import HTTPInputError
+from tornado.simple_httpclient import HTTPStreamClosedError
 from wott_directory.client import DirectoryClient, ProblemError
 
 from wott_hub.td.media import TD_ACCEPT
@@ -34,9 +45,13 @@ from wott_hub.td.media import TD_ACCEPT
 from .browser import _call
 from .records import ServiceRecord
 
-__all__ = ["Claim", "Explorer", "FoundThing", "td_kind"]
+__all__ = ["MAX_TD_BYTES", "Claim", "Explorer", "FoundThing", "td_kind"]
 
 log = logging.getLogger("wott_hub.discovery")
+
+MAX_TD_BYTES = 1024 * 1024
+"""Default cap on a TD fetched from an introduction, bytes."""
+_PARSE_ON_LOOP_BYTES = 64 * 1024  # larger bodies are parsed on a worker thread
 
 
 def td_kind(td: dict[str, Any]) -> str:
@@ -78,7 +93,7 @@ class Explorer:
                  on_lost: Callback | None = None,
                  claim: Claim | None = None, timeout: float = 5.0,
                  own_ids: set[str] | None = None, follow_directories: bool = True,
-                 directory_token: str | None = None) -> None:
+                 directory_token: str | None = None, max_td_bytes: int = MAX_TD_BYTES) -> None:
         self.on_found = on_found
         self.on_updated = on_updated
         self.on_lost = on_lost
@@ -87,9 +102,11 @@ class Explorer:
         self.own_ids = own_ids if own_ids is not None else set()
         self.follow_directories = follow_directories
         self.directory_token = directory_token
+        self.max_td_bytes = max_td_bytes
         self.things: dict[str, FoundThing] = {}
         self.directories: dict[str, asyncio.Task[None]] = {}
-        self._http = AsyncHTTPClient(force_instance=True)
+        self.unreadable: dict[str, int] = {}  # origin (scheme://host:port) -> TDs it refused us, in a row
+        self._http = AsyncHTTPClient(force_instance=True, max_body_size=max_td_bytes)
         self._service_things: dict[str, str] = {}  # mDNS name -> TD id
         self._service_dirs: dict[str, str] = {}  # mDNS name -> directory URL
         self._lock = asyncio.Lock()
@@ -98,8 +115,14 @@ class Explorer:
     async def fetch_td(self, url: str) -> dict[str, Any]:
         req = HTTPRequest(url, headers={"Accept": TD_ACCEPT}, request_timeout=self.timeout,
                           follow_redirects=True)
-        resp = await self._http.fetch(req)
-        td = json.loads(resp.body)
+        try:
+            resp = await self._http.fetch(req)
+        except (HTTPInputError, HTTPStreamClosedError) as e:  # past max_td_bytes tornado stops reading
+            raise ValueError(f"{url}: not read to its end ({e}): a TD longer than {self.max_td_bytes} bytes "
+                             "(max_td_bytes) is refused") from None
+        body = resp.body
+        big = len(body) > _PARSE_ON_LOOP_BYTES
+        td = await asyncio.to_thread(json.loads, body) if big else json.loads(body)
         if not isinstance(td, dict):
             raise ValueError(f"{url} did not return a TD (a JSON object)")
         return td
@@ -121,8 +144,9 @@ class Explorer:
         try:
             td, url = await self.fetch_record(rec)
         except OSError as e:
-            log.warning("could not fetch the TD of %s: %s", rec.name, e)
+            self._unreadable(rec, e)
             return
+        self._readable(rec)
         source = f"mdns:{rec.name}"
         kind = td_kind(td)
         if kind == "Directory" or rec.kind == "Directory":
@@ -145,6 +169,22 @@ class Explorer:
             await self._drop_source(old_id, source)
 
     service_updated = service_added
+
+    def _unreadable(self, rec: ServiceRecord, error: OSError) -> None:
+        """One warning per origin that refuses us (a remote hub), the rest at debug."""
+        origin = _origin(rec)
+        refused = self.unreadable.get(origin, 0)
+        self.unreadable[origin] = refused + 1
+        if refused == 0:
+            log.warning("cannot read the TDs announced by %s (%s: %s); its further failures are logged at "
+                        "debug", origin, rec.name, error)
+        else:
+            log.debug("could not fetch the TD of %s: %s", rec.name, error)
+
+    def _readable(self, rec: ServiceRecord) -> None:
+        refused = self.unreadable.pop(_origin(rec), 0)
+        if refused > 1:
+            log.info("%s answers again (%d of its TDs could not be read before)", _origin(rec), refused)
 
     async def service_removed(self, rec: ServiceRecord) -> None:
         """Browser ``on_remove``: the Thing loses this introduction (lost when it has no other)."""
@@ -270,6 +310,10 @@ class Explorer:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         self._http.close()
+
+
+def _origin(rec: ServiceRecord) -> str:
+    return f"{rec.scheme}://{min(rec.hosts)}:{rec.port}"
 
 
 def _consumed(td: dict[str, Any], url: str) -> dict[str, Any]:

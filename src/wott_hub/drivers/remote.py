@@ -15,6 +15,15 @@ rounding), contacts where the source's are, forces along the normal (shear is
 not in the packets and is lost). Its ε is the source's (``tac:epsilon``) less
 one rounding step, so a node the source reports at exactly ε is kept.
 
+Bounded, whatever the device sends (it may be anything on the network that announces
+itself): the TD at most ``max_td_bytes`` (1 MiB by default), each of ``skinNodes`` and
+``skinCells`` at most ``PROPERTY_BYTES_PER_NODE`` x ``max_nodes`` bytes, read as a stream
+and refused as soon as it is longer; a mesh of more than ``max_nodes`` nodes (20,000 by
+default) or more than ``CELLS_PER_NODE`` x that many cells is refused before it is built.
+Parsing the answers and building the mesh run on a worker thread, never on the event
+loop that carries the other devices' frames. A refusal is a ``DriverError`` naming the
+bound: the device is not adopted, and says why (docs/reliability.md).
+
 The stream is kept alive here: a refused or dropped connection is reported as
 ``disconnected`` with its reason and retried with ``Backoff``; the reconnect
 sends ``Last-Event-ID``, so a source that keeps history (a wott-hub) resends
@@ -28,6 +37,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import re
 import time
 from collections.abc import AsyncIterator
 from typing import Any
@@ -50,7 +60,8 @@ from wott_hub.td.media import TD_ACCEPT
 from .backoff import Backoff
 from .base import Driver, DriverError, Health, Retargetable
 
-__all__ = ["EVENT", "FAMILY", "SKIN", "RemoteWoTDriver", "event_url", "property_url", "tactile_affordances"]
+__all__ = ["CELLS_PER_NODE", "EVENT", "FAMILY", "MAX_NODES", "MAX_TD_BYTES", "PROPERTY_BYTES_PER_NODE",
+           "SKIN", "RemoteWoTDriver", "event_url", "property_url", "tactile_affordances"]
 
 log = logging.getLogger("wott_hub.drivers.remote")
 
@@ -58,6 +69,14 @@ FAMILY = "wot-remote"
 SKIN = ("skinNodes", "skinCells")
 EVENT = "skinDeformedDetection"
 _ROUNDING_MM = 0.0006  # a packet's intensities are rounded to 1 µm; one step and a margin
+MAX_NODES = 20_000
+"""Default cap on a remote device's mesh (the TacLink barrel has 707 nodes, a 64x64 mattress 4,096)."""
+MAX_TD_BYTES = 1024 * 1024
+"""Default cap on a remote device's TD, bytes."""
+PROPERTY_BYTES_PER_NODE = 256
+"""A skinNodes or skinCells answer may be this many bytes per allowed node (~110 are used)."""
+CELLS_PER_NODE = 4
+"""Cells per allowed node at most (a closed triangle mesh has about 2)."""
 
 
 # --- reading a TD's forms ---------------------------------------------------------------
@@ -121,6 +140,31 @@ def tactile_affordances(td: dict[str, Any], td_url: str | None = None) -> dict[s
 
 
 # --- from property values to a DeviceDescription ----------------------------------------------
+
+def _shown(url: Any) -> str:
+    """A URL as an error or a health reason shows it: without its query (it may carry a token)."""
+    parts = urlsplit(str(url))
+    return f"{parts.scheme}://{parts.netloc}{parts.path}" if parts.netloc else str(url).partition("?")[0]
+
+
+def _unquoted(error: BaseException) -> str:
+    """An HTTP client's message with every URL in it shown as ``_shown`` does."""
+    return re.sub(r"https?://[^\s'\"]+", lambda m: _shown(m.group(0)), str(error))
+
+
+def _parse(raw: bytes, name: str) -> Any:
+    try:
+        return json.loads(raw)
+    except (ValueError, RecursionError) as e:
+        raise DriverError(f"{name}: not JSON: {type(e).__name__}: {e}") from None
+
+
+def _counted(value: Any, key: str, limit: int, what: str) -> None:
+    items = value.get(key) if isinstance(value, dict) else None
+    if isinstance(items, list) and len(items) > limit:
+        raise DriverError(f"the device's mesh has {len(items)} {what}, more than the {limit} allowed "
+                          f"(max_nodes); not adopted")
+
 
 def _mesh(nodes_value: Any, cells_value: Any, name: str) -> tuple[SkinMesh, dict[int, int] | None]:
     """The mesh in node-ID order, and the ID -> row map when IDs are not 0..N-1."""
@@ -200,7 +244,8 @@ class RemoteWoTDriver(Driver, Retargetable):
     def __init__(self, device_id: str, *, td: dict[str, Any] | None = None, url: str | None = None,
                  title: str | None = None, timeout_s: float = 5.0, idle_timeout_s: float = 60.0,
                  epsilon_mm: float | None = None, thickness_mm: float = 3.0,
-                 backoff: Backoff | None = None, queue_size: int = 1024, token: str | None = None) -> None:
+                 backoff: Backoff | None = None, queue_size: int = 1024, token: str | None = None,
+                 max_nodes: int = MAX_NODES, max_td_bytes: int = MAX_TD_BYTES) -> None:
         if td is None and url is None:
             raise DriverError("needs the device's TD or its URL")
         super().__init__(None)  # type: ignore[arg-type]  # described by prepare()
@@ -215,6 +260,8 @@ class RemoteWoTDriver(Driver, Retargetable):
         self.thickness_mm = thickness_mm
         self.backoff = backoff or Backoff(initial_s=0.2, cap_s=10.0)
         self.queue_size = queue_size
+        self.max_nodes = max_nodes
+        self.max_td_bytes = max_td_bytes
         self.last_event_id: str | None = None
         self.packets = 0
         self.bad_packets = 0
@@ -238,33 +285,50 @@ class RemoteWoTDriver(Driver, Retargetable):
     async def prepare(self) -> None:
         import httpx
 
+        raw: dict[str, bytes] = {}
         try:
             async with self._client() as client:
                 if self.td is None:
-                    # not at module level: discovery (zeroconf, the directory client) stays off the
-                    # hub's start-up path
-
-                    resp = await client.get(self.td_url, headers={"Accept": TD_ACCEPT})
-                    resp.raise_for_status()
-                    self.td = resp.json()
-                    if not isinstance(self.td, dict):
-                        raise DriverError(f"{self.td_url} did not answer a TD (a JSON object)")
+                    body = await self._get(client, self.td_url, TD_ACCEPT, self.max_td_bytes,
+                                           "the TD (max_td_bytes)")
+                    td = await asyncio.to_thread(_parse, body, "the TD")
+                    if not isinstance(td, dict):
+                        raise DriverError(f"{_shown(self.td_url)} did not answer a TD (a JSON object)")
+                    self.td = td
                 urls = tactile_affordances(self.td, self.td_url)
                 if urls is None:
                     raise DriverError("the TD lacks skinNodes, skinCells or skinDeformedDetection with "
                                       "HTTP (GET) and SSE forms")
-                values = {name: await self._read(client, name) for name in SKIN}
+                limit = PROPERTY_BYTES_PER_NODE * self.max_nodes
+                for name in SKIN:
+                    why = f"{PROPERTY_BYTES_PER_NODE} per node, max_nodes {self.max_nodes}"
+                    raw[name] = await self._read_raw(client, name, limit, why)
                 for name in ("skinShape", "skinMaterial", "sensorCoordinateFrame"):
                     if property_url(self.td, name, self.td_url) is not None:
-                        with contextlib.suppress(httpx.HTTPError, ValueError, DriverError):
-                            values[name] = await self._read(client, name)
-        except (httpx.HTTPError, ValueError) as e:  # unreachable, an HTTP error, not JSON
-            raise DriverError(f"cannot read the device at {self.td_url or (self.td or {}).get('base')}: "
-                              f"{type(e).__name__}: {e}") from None
-        td = self.td
+                        with contextlib.suppress(httpx.HTTPError, DriverError):
+                            raw[name] = await self._read_raw(client, name, 64 * 1024)
+        except httpx.HTTPError as e:  # unreachable, an HTTP error
+            where = _shown(self.td_url or (self.td or {}).get("base"))
+            raise DriverError(f"cannot read the device at {where}: {type(e).__name__}: "
+                              f"{_unquoted(e)}") from None
+        # parsing and building a mesh is milliseconds per thousand nodes: never on the event loop
+        self.description = await asyncio.to_thread(self._describe, self.td, raw)
+        self._inward = -self.description.mesh.normals
+
+    def _describe(self, td: dict[str, Any], raw: dict[str, bytes]) -> DeviceDescription:
+        """The device's description from the raw property answers (on a worker thread, bounded)."""
+        values: dict[str, Any] = {}
+        for name, body in raw.items():
+            try:
+                values[name] = _parse(body, name)
+            except DriverError:
+                if name in SKIN:
+                    raise
+        _counted(values["skinNodes"], "arrayOfNodes", self.max_nodes, "nodes")
+        _counted(values["skinCells"], "arrayOfCells", CELLS_PER_NODE * self.max_nodes, "cells")
         mesh, self._index = _mesh(values["skinNodes"], values["skinCells"], self.device_id)
         source = self.td_url or td.get("base") or td.get("id", "")
-        self.description = DeviceDescription(
+        return DeviceDescription(
             id=self.device_id, title=self.title or str(td.get("title") or self.device_id), family=FAMILY,
             shape=_shape(values.get("skinShape")), material=_material(values.get("skinMaterial")),
             mesh=mesh, frame=_frame(values.get("sensorCoordinateFrame")),
@@ -272,20 +336,34 @@ class RemoteWoTDriver(Driver, Retargetable):
             description=f"WoT device {td.get('id', '')} ({source}), re-exposed: intensities along the "
                         "inward normal, as precise as its skinDeformedDetection packets",
         )
-        self._inward = -mesh.normals
 
     def _known_td(self) -> dict[str, Any]:
         if self.td is None:
             raise DriverError(f"device {self.device_id!r}: its TD is not known (prepare() was not called)")
         return self.td
 
-    async def _read(self, client: Any, name: str) -> Any:
+    @staticmethod
+    async def _get(client: Any, url: Any, accept: str, limit: int, what: str) -> bytes:
+        """The body at ``url``, read as a stream and refused once it is longer than ``limit`` bytes."""
+        async with client.stream("GET", url, headers={"Accept": accept}) as resp:
+            resp.raise_for_status()
+            length = resp.headers.get("Content-Length")
+            if length is not None and length.isdigit() and int(length) > limit:
+                raise DriverError(f"{what} is {int(length)} bytes, more than the {limit} allowed; "
+                                  "not adopted")
+            chunks, size = [], 0
+            async for chunk in resp.aiter_bytes():
+                size += len(chunk)
+                if size > limit:
+                    raise DriverError(f"{what} is more than the {limit} bytes allowed; not adopted")
+                chunks.append(chunk)
+        return b"".join(chunks)
+
+    async def _read_raw(self, client: Any, name: str, limit: int, why: str = "") -> bytes:
         url = property_url(self._known_td(), name, self.td_url)
         if url is None:
             raise DriverError(f"the TD has no HTTP readproperty form for {name}")
-        resp = await client.get(url, headers={"Accept": "application/json"})
-        resp.raise_for_status()
-        return resp.json()
+        return await self._get(client, url, "application/json", limit, f"{name} ({why})" if why else name)
 
     # -- frames ----------------------------------------------------------------------------------
 
@@ -326,7 +404,7 @@ class RemoteWoTDriver(Driver, Retargetable):
                     return
                 headers = {"Last-Event-ID": self.last_event_id} if self.last_event_id else {}
                 if self.health().state is not Health.ok or self.connects == 0:
-                    self.set_health(Health.disconnected, f"connecting to {url}")
+                    self.set_health(Health.disconnected, f"connecting to {_shown(url)}")
                 quiet = False
                 try:
                     async with aconnect_sse(client, "GET", url, headers=headers) as source:
@@ -347,7 +425,7 @@ class RemoteWoTDriver(Driver, Retargetable):
                 except httpx.ReadTimeout:
                     quiet, reason = True, f"no data for {self.idle_timeout_s:g} s"
                 except (httpx.HTTPError, SSEError, OSError) as e:
-                    reason = f"{type(e).__name__}: {e}".rstrip(": ")
+                    reason = f"{type(e).__name__}: {_unquoted(e)}".rstrip(": ")
                 if quiet and self.health().state is Health.ok:
                     continue  # a silent stream, not a fault: reconnect at once, resuming
                 self.set_health(Health.disconnected, reason)

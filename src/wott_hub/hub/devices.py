@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.errors import Conflict
+from wott_hub.plugins.model import check_device_id
 from wott_hub.runtime.capabilities import action_names
-from wott_hub.runtime.opening import open_driver
+from wott_hub.runtime.opening import CLOSE_TIMEOUT_S, open_driver
 from wott_hub.runtime.pipeline import CONTACTS, UNAVAILABLE, DevicePipeline
 from wott_hub.servient import ServedThing, clean_td
 from wott_hub.td.builder import build_tactile_td, static_property_values
@@ -39,6 +40,14 @@ if TYPE_CHECKING:
 __all__ = ["DeviceRuntime", "Devices"]
 
 log = logging.getLogger("wott_hub.hub")
+
+_HALT_MARGIN_S = 1.0
+"""Beyond a driver's own ``close()`` bound: what a cancelled pipeline may take to end."""
+
+
+def _consume(task: asyncio.Future[Any]) -> None:
+    if not task.cancelled():
+        task.exception()
 
 
 @dataclass(eq=False)
@@ -134,6 +143,7 @@ class Devices:
         return await self._add(desc, pipeline, None, family=family, record=record, run=run, config=config)
 
     def _check_free(self, tid: str) -> None:
+        check_device_id(tid, "device id")  # every binding's syntax (plugins.model), whoever opened it
         if tid in self.things.server.things.by_id:
             raise Conflict(f"device id {tid!r} is already served")
 
@@ -179,12 +189,20 @@ class Devices:
                                        name=f"device:{dev.id}")
 
     async def _halt(self, dev: DeviceRuntime) -> None:
+        """Stop a device's pipeline and close its driver, in ``CLOSE_TIMEOUT_S`` (and a margin) at most:
+        a ``close()`` that hangs, or a ``frames()`` that will not end once cancelled (a camera that never
+        opens), is logged and left behind; the device is removed / the hub stops anyway."""
         task, dev.task = dev.task, None
         if task is not None:
             task.cancel()
-        await dev.pipeline.close()
+        waits: set[asyncio.Future[Any]] = {asyncio.ensure_future(dev.pipeline.close())}
         if task is not None:
-            await asyncio.gather(task, return_exceptions=True)
+            waits.add(task)
+        _, late = await asyncio.wait(waits, timeout=CLOSE_TIMEOUT_S + _HALT_MARGIN_S)
+        if task is not None and task in late:
+            log.error("device %s: its driver's frames() did not end within %g s of being cancelled; "
+                      "abandoned", dev.id, CLOSE_TIMEOUT_S + _HALT_MARGIN_S)
+            task.add_done_callback(_consume)  # if it ever ends, its outcome is not an unhandled error
 
     async def remove(self, device_id: str) -> None:
         dev = self.running.pop(device_id)
@@ -192,13 +210,9 @@ class Devices:
         self.things.unserve(device_id)
 
     async def stop(self) -> None:
-        """Stop every pipeline and close every driver, then the worker processes."""
-        tasks = [d.task for d in self.running.values() if d.task is not None]
-        for t in tasks:
-            t.cancel()
-        for d in self.running.values():
-            await d.pipeline.close()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        """Stop every pipeline and close every driver (at once, each bounded as in ``_halt``), then the
+        worker processes."""
+        await asyncio.gather(*(self._halt(d) for d in self.running.values()))
         if self.pool is not None:
             await self.pool.close()
 

@@ -125,6 +125,8 @@ class Hub:
             return
         self.state = "stopping"
         self._fleet.live = False
+        if self._mqtt is not None:  # retained state cleared first: a stop cut short leaves none stale
+            await self._mqtt.withdraw()
         await self._network.stop()
         self._status.stop_watching()
         self._replay.cancel_all()

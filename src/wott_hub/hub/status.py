@@ -1,8 +1,10 @@
 """The hub Thing: what the hub serves and how it is doing, as WoT properties and events.
 
 Its properties ``devices``, ``health`` and ``eventCounters`` are computed when
-read; a watcher publishes ``healthChange`` when a device's state changes (and
-the ``health`` property with it, when someone observes it). Nothing a plugin
+read; a watcher publishes ``healthChange`` when a device's state changes, and the
+``health`` property (when someone observes it: an SSE client, the MQTT publisher,
+which retains it) at its first pass and whenever the hub's own state, history's,
+the broker link's or a device's changes: an observer's last value is never stale. Nothing a plugin
 does can break them: a device's ``health()`` is read through its pipeline's
 guard (``runtime.pipeline``), and a watcher iteration that fails anyway is logged (once
 per distinct failure) and the watcher carries on. ``health`` names the plugins
@@ -113,23 +115,30 @@ class HubStatus:
 
     async def _watch(self, every_s: float = 1.0) -> None:
         """Every ``every_s``: one ``check``; a check that raises is logged and the next one runs."""
-        memo: dict[str, tuple[str, str]] = {}
+        memo: dict[str, Any] = {}
         guard = Guard("health watcher", logger=log)
         while True:
             guard.call("a check", self._check, memo)
             await asyncio.sleep(every_s)
 
-    def _check(self, memo: dict[str, tuple[str, str]]) -> None:
-        """Publish ``healthChange`` for each device whose (state, reason) changed since ``memo``."""
+    def _check(self, memo: dict[str, Any]) -> None:
+        """Publish ``healthChange`` for each device whose (state, reason) changed since ``memo``, and
+        ``health`` when its states changed (the hub's own included; module docstring)."""
         plane = self.plane
-        changed = False
+        devices: dict[str, tuple[str, str]] = memo.setdefault("devices", {})
         for d in list(self.devices.running.values()):
             now = d.health_state()
-            if memo.get(d.id) != now:
-                if d.id in memo or now[0] != "ok":
+            if devices.get(d.id) != now:
+                if d.id in devices or now[0] != "ok":
                     plane.publish(HUB_THING_ID, KIND_EVENT, "healthChange", time.time_ns(), encode(
                         {"device": d.id, "state": now[0], "reason": now[1], "timeStamp": time.time_ns()}))
-                memo[d.id] = now
-                changed = True
-        if changed and plane.wants(HUB_THING_ID, KIND_PROPERTY, "health"):
-            plane.publish(HUB_THING_ID, KIND_PROPERTY, "health", time.time_ns(), encode(self.health()))
+                devices[d.id] = now
+        for gone in devices.keys() - self.devices.running.keys():
+            del devices[gone]
+        health = self.health()
+        states = (health["state"], tuple(sorted((k, v.get("state"), v.get("reason"))
+                                               for k, v in health["devices"].items())),
+                  health["history"].get("state"), (health.get("mqtt") or {}).get("state"))
+        if memo.get("states") != states and plane.wants(HUB_THING_ID, KIND_PROPERTY, "health"):
+            plane.publish(HUB_THING_ID, KIND_PROPERTY, "health", time.time_ns(), encode(health))
+            memo["states"] = states

@@ -18,9 +18,23 @@ from 0.2 s to ``reconnect_max_s``; on each (re)connect the TDs and the last valu
 of each property are published again, retained (a broker restarted without
 persistence has lost them). ``health()`` says all of this; the hub Thing reports it.
 
-A clean stop clears the hub's retained TDs and property values (an empty
-retained message), as a clean stop deletes its TDs from directories; a crashed
-hub's stay until it comes back (the directory's ttl, not MQTT, says who is alive).
+Retained state is never left stale (docs/reliability.md, "MQTT"):
+
+- the hub Thing's ``health`` is retained like any observable property, and the hub
+  publishes it at start and whenever its state changes (``hub.status``);
+- every connection carries a last will on that topic, retained: ``{"state":
+  "disconnected", ...}``. A hub killed (SIGKILL, power, a network cut longer than the
+  keepalive) is marked so by the broker itself: the hub and the Things it serves are
+  offline. The next connection publishes the real health again;
+- a clean stop clears the hub's retained TDs and property values (an empty retained
+  message), ``health`` included, then disconnects cleanly (no will), as a clean stop
+  deletes its TDs from directories; the hub does it first thing in ``stop``
+  (``withdraw``), before the slower parts stop;
+- a broker that accepts a connection and never answers it (no CONNACK) is given up
+  after ``CONNECT_TIMEOUT_S`` and tried again with the backoff; one that stops reading
+  shows in health as ``stalled`` once nothing has been written for ``STALL_S`` while
+  messages wait (paho's keepalive then drops the connection).
+
 Topics, QoS and forms: ``wott_hub.td.mqtt``.
 """
 
@@ -28,8 +42,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import socket
+import time
 from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -38,6 +54,7 @@ import aiomqtt
 import paho.mqtt.client as mqtt
 
 from wott_hub.events.record import KIND_EVENT, Record
+from wott_hub.servient import HUB_THING_ID
 
 if TYPE_CHECKING:
     from wott_hub.events.plane import EventPlane
@@ -54,6 +71,13 @@ BATCH = 2000  # messages handed to paho before waiting for them to be sent
 CHUNK = 64 * 1024  # bytes of QoS 0 messages joined into one write
 FIRST_DELAY_S = 0.2
 CLEAR_TIMEOUT_S = 2.0
+CONNECT_TIMEOUT_S = 10.0
+"""A broker that has not answered a connection (CONNACK) by then is given up on, and tried again."""
+STALL_S = 5.0
+"""Messages waiting and nothing written for this long: the broker is not reading (health ``stalled``)."""
+KEEPALIVE_S = 30
+WILL_REASON = ("the hub's connection to the broker ended without a clean stop (MQTT last will): "
+               "the hub and every Thing it serves are offline")
 
 Message = tuple[str, str | bytes, int, bool]  # topic, payload, qos, retain
 
@@ -107,6 +131,20 @@ def _queue_chunk(paho: mqtt.Client, sock: socket.socket | None, chunk: bytearray
         queue.extendleft(reversed(held))
         raise aiomqtt.MqttError("connection lost while sending")
     return _write(paho, sock, chunk)
+
+
+def _drop(client: aiomqtt.Client) -> None:
+    """Close a connection aiomqtt did not finish opening (or closing): its socket and reader go."""
+    paho = client._client  # noqa: SLF001 - aiomqtt's paho client (a documented escape hatch)
+    with contextlib.suppress(Exception):
+        paho._sock_close()  # noqa: SLF001 - paho's own way to drop a socket (on_socket_close: the reader)
+
+
+async def _dropped_after(client: aiomqtt.Client) -> None:
+    """Pushed after aiomqtt's exit: when that exit did not close the socket (cancelled while a broker
+    that does not read holds the DISCONNECT), close it here."""
+    if client._client.socket() is not None:  # noqa: SLF001 - see _drop
+        _drop(client)
 
 
 class _Tap:
@@ -163,6 +201,17 @@ class MqttPublisher:
         self._immediate = cfg.immediate  # off after a failure, until the next connection
         self._task: asyncio.Task[None] | None = None
         self._client: aiomqtt.Client | None = None
+        self._progress_at = time.monotonic()  # when the broker last took what was waiting (or none waited)
+        self.withdrawn = False
+
+    @property
+    def health_topic(self) -> str:
+        """The hub Thing's ``health`` property topic: the last will's, so killed means offline."""
+        return self.layout.property_topic(HUB_THING_ID, "health")
+
+    def _will(self) -> aiomqtt.Will:
+        payload = json.dumps({"state": "disconnected", "reason": WILL_REASON, "devices": {}})
+        return aiomqtt.Will(self.health_topic, payload, qos=1, retain=True)
 
     # --- following the served Things -----------------------------------------------------
 
@@ -200,18 +249,28 @@ class MqttPublisher:
 
     def start(self) -> None:
         self.running = True
+        self.withdrawn = False
         self._task = asyncio.create_task(self._run(), name="mqtt-publisher")
 
-    async def stop(self) -> None:
-        """Send what is queued (briefly), clear the retained TDs and values, disconnect."""
-        if self._task is None:
+    async def withdraw(self) -> None:
+        """The first step of a clean stop: publish nothing more, send what is queued and clear the
+        retained TDs and values (``CLEAR_TIMEOUT_S`` at most). The connection stays until ``stop``."""
+        if self._task is None or self.withdrawn:
             return
         self.running = False
+        self.withdrawn = True
         if self.connected:
-            for topic in list(self.retained):
+            for topic in {*self.retained, self.health_topic}:  # health: what the will would say
                 self.put((topic, b"", 1, True))
+            self.retained.clear()
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._flushed(), CLEAR_TIMEOUT_S)
+
+    async def stop(self) -> None:
+        """``withdraw`` (if not done yet), then disconnect cleanly (the will is not published)."""
+        if self._task is None:
+            return
+        await self.withdraw()
         self._task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await self._task
@@ -226,13 +285,22 @@ class MqttPublisher:
         delay = FIRST_DELAY_S
         while True:
             try:
-                async with aiomqtt.Client(self.host, self.port, identifier=self.client_id,
-                                          keepalive=30, timeout=10, max_inflight_messages=0,
-                                          protocol=aiomqtt.ProtocolVersion.V311) as client:
+                client = aiomqtt.Client(self.host, self.port, identifier=self.client_id,
+                                        keepalive=KEEPALIVE_S, timeout=10, max_inflight_messages=0,
+                                        protocol=aiomqtt.ProtocolVersion.V311, will=self._will())
+                async with contextlib.AsyncExitStack() as stack:
+                    stack.push_async_callback(_dropped_after, client)  # last: if the clean exit is cut short
+                    try:
+                        await asyncio.wait_for(stack.enter_async_context(client), CONNECT_TIMEOUT_S)
+                    except TimeoutError:
+                        _drop(client)
+                        raise aiomqtt.MqttError(f"the broker accepted the connection but did not answer it "
+                                                f"(no CONNACK) within {CONNECT_TIMEOUT_S:g} s") from None
                     self._client = client
                     self.connected = True
                     self.connects += 1
                     self.last_error = ""
+                    self._progress_at = time.monotonic()
                     delay = FIRST_DELAY_S
                     log.info("MQTT: connected to %s:%d", self.host, self.port)
                     self._requeue_retained()
@@ -302,6 +370,7 @@ class MqttPublisher:
             if not queue:
                 wake.clear()
                 self.idle = True  # everything handed over is on the socket
+                self._progress_at = time.monotonic()
                 self._direct = direct if self._immediate else None
                 await wake.wait()
                 self._direct = None
@@ -337,11 +406,23 @@ class MqttPublisher:
                 spins += 1
                 await asyncio.sleep(0 if spins < 100 else 0.001)
             self.published += n
+            self._progress_at = time.monotonic()
 
     # --- what the hub Thing reports -------------------------------------------------------
 
+    def stalled_s(self) -> float:
+        """How long messages have waited with nothing written (0: the broker keeps up)."""
+        if not self.connected or (self.idle and not self.queue):
+            return 0.0
+        return max(0.0, time.monotonic() - self._progress_at)
+
     def health(self) -> dict[str, Any]:
-        return {"state": "ok" if self.connected else "disconnected",
-                "broker": f"mqtt://{self.host}:{self.port}", "prefix": self.layout.prefix,
+        stalled = self.stalled_s()
+        state = "disconnected" if not self.connected else "stalled" if stalled >= STALL_S else "ok"
+        error = self.last_error
+        if state == "stalled":
+            error = (f"the broker has taken nothing for {stalled:.0f} s ({len(self.queue)} messages "
+                     "waiting): it accepts the connection but does not read")
+        return {"state": state, "broker": f"mqtt://{self.host}:{self.port}", "prefix": self.layout.prefix,
                 "published": self.published, "dropped": self.dropped, "queued": len(self.queue),
-                "connects": self.connects, "error": self.last_error}
+                "connects": self.connects, "error": error}

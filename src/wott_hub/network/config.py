@@ -23,6 +23,8 @@ Urls = Annotated[tuple[Url, ...], says("a list of directory URLs")]
 Interfaces = Annotated[tuple[Annotated[str, says("an interface address", min_length=1)], ...],
                        says("a list of interface addresses")]
 TtlSeconds = Annotated[float, bounded("a positive number of seconds", ge=1.0, le=86_400.0)]
+TdBytes = Annotated[int, says("a number of bytes", ge=1024, le=64 * 1024 * 1024)]
+Nodes = Annotated[int, says("a number of nodes", ge=1, le=1_000_000)]
 
 
 class RegistrationTable(Model):
@@ -73,6 +75,12 @@ class DiscoveryConfig:
     adopt_hub_things: Flag = field(default=False, metadata=doc(
         "Also adopt Things another wott-hub serves (ids urn:wott-hub:...); off: they are served "
         "already, by their hub, and two hubs mirroring each other double every stream."))
+    max_td_bytes: TdBytes = field(default=1024 * 1024, metadata=doc(
+        "Largest TD read from an mDNS introduction or adopted device, bytes; a longer one is not "
+        "read to its end and the Thing is not adopted (anyone on the LAN may announce one)."))
+    max_adopted_nodes: Nodes = field(default=20_000, metadata=doc(
+        "Largest mesh of a device adopted by discovery (wot-remote), nodes (and 4 cells per node); "
+        "a device with more is refused before its mesh is built."))
 
     @classmethod
     def off(cls) -> DiscoveryConfig:
@@ -109,7 +117,8 @@ def parse_discovery(table: Any, source: str) -> DiscoveryConfig:
     t = read(DISCOVERY_TABLE, table, f"{source}: [discovery]")
     return DiscoveryConfig(mdns=t.mdns, browse=t.browse, interfaces=t.interfaces,
                            directories=tuple(_slash(u) for u in t.directories),
-                           adopt_hub_things=t.adopt_hub_things)
+                           adopt_hub_things=t.adopt_hub_things, max_td_bytes=t.max_td_bytes,
+                           max_adopted_nodes=t.max_adopted_nodes)
 
 
 def embedded_directory_settings(**values: Any) -> Any:

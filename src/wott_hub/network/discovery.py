@@ -15,6 +15,12 @@ leaves (mDNS goodbye, deleted from its directory) the device is reported
 ``disconnected`` and stays served, ready for its return. The hub's own
 services and Things are never adopted (own instance names and TD ids), nor,
 unless ``adopt_hub_things``, the Things another wott-hub already serves.
+
+Anyone on the LAN may announce a Thing, so adoption is bounded (docs/reliability.md):
+a TD is read up to ``max_td_bytes``; a ``wot-remote`` device gets ``max_td_bytes`` and
+``max_adopted_nodes`` as its caps (its driver refuses a larger mesh before building it,
+and builds it off the event loop); a claimed id is made valid for every binding
+(``plugins.model.device_id_from``).
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 from wott_hub.drivers.base import Retargetable
+from wott_hub.drivers.remote import FAMILY as REMOTE_FAMILY
+from wott_hub.plugins.model import device_id_from
 from wott_hub.servient import ALL_INTERFACES
 
 from .config import DiscoveryConfig
@@ -123,7 +131,8 @@ class HubDiscovery:
             from wott_hub.discovery import Explorer
 
             self.explorer = Explorer(on_found=self._found, on_updated=self._updated, on_lost=self._lost,
-                                     claim=_claim, own_ids=self.own_ids, follow_directories=cfg.browse)
+                                     claim=_claim, own_ids=self.own_ids, follow_directories=cfg.browse,
+                                     max_td_bytes=cfg.max_td_bytes)
             if self.zc is not None and cfg.browse:
                 from wott_hub.discovery import Browser
 
@@ -231,7 +240,10 @@ class HubDiscovery:
         from wott_hub.errors import WottHubError
 
         cfg = found.config
-        device_id = self._free_id(cfg.id)
+        device_id = self._free_id(device_id_from(cfg.id))
+        if cfg.family == REMOTE_FAMILY:  # the caps of [discovery], unless the claim set its own
+            cfg = replace(cfg, settings={"max_nodes": self.cfg.max_adopted_nodes,
+                                         "max_td_bytes": self.cfg.max_td_bytes, **cfg.settings})
         try:
             await self.hub.add_device(replace(cfg, id=device_id))
         except Exception as e:  # DriverError, or a plugin's bug: the others are still adopted

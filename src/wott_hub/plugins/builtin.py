@@ -79,9 +79,10 @@ def wott_hub_open_device(config: DeviceConfig) -> Driver:
                                 else "setting 'scene': give only one of 'scene' or 'step'")
         if s.material is not None and s.material not in MATERIALS:
             raise SettingsError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
+        scene: Scene | str
         try:
             if s.scene is not None:
-                scene = Scene.load(s.scene)
+                scene = s.scene  # read by the driver's prepare(), off the event loop and bounded
             else:
                 scene = Scene.from_dict({"scene": {"name": config.id, "loop": s.loop}, "step": s.step},
                                         source=f"device {config.id!r} step")

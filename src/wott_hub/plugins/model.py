@@ -9,21 +9,43 @@ and its JSON Schema in docs/configuration.md.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
 from wott_hub.configspec import Model, read, says
-from wott_hub.errors import SettingsError
+from wott_hub.errors import InvalidInput, SettingsError
 
-__all__ = ["DeviceConfig", "DeviceTable", "FamilyInfo", "PluginInfo"]
+__all__ = ["DEVICE_ID_PATTERN", "DEVICE_ID_RULE", "DeviceConfig", "DeviceTable", "FamilyInfo", "PluginInfo",
+           "check_device_id", "device_id_from"]
+
+DEVICE_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._~-]{0,63}$"
+"""A device id every binding takes as it is (module docstring)."""
+_DEVICE_ID = re.compile(DEVICE_ID_PATTERN)
+DEVICE_ID_RULE = ("1 to 64 letters, digits, '.', '_', '~' or '-', starting with a letter or digit "
+                  "(it goes into URLs, MQTT topics and Thing ids as it is)")
+
+
+def check_device_id(value: Any, where: str = "id") -> str:
+    """``value`` if it is a valid device id, else ``InvalidInput`` naming ``where`` and the rule."""
+    if not isinstance(value, str) or not _DEVICE_ID.match(value):
+        raise InvalidInput(f"{where}: {DEVICE_ID_RULE}, got {value!r}")
+    return value
+
+
+def device_id_from(text: str, default: str = "device") -> str:
+    """A valid device id made of ``text``: every other character becomes '-', cut to 64."""
+    out = re.sub(r"[^A-Za-z0-9._~-]+", "-", text).strip("-._~")[:64].rstrip("-._~")
+    return out if out and _DEVICE_ID.match(out) else default
 
 
 class DeviceTable(Model, forbid_unknown_fields=False):
     """A device: id, family, and the family's settings."""
 
     # the other keys are the family's settings, checked against its model when the device opens
-    id: Annotated[str, says("a non-empty string", pattern=r"\S", description="Unique device id (not 'hub').")]
+    id: Annotated[str, says(DEVICE_ID_RULE, pattern=DEVICE_ID_PATTERN,
+                            description="Unique device id (not 'hub'): " + DEVICE_ID_RULE + ".")]
     family: Annotated[str, says("a non-empty string", pattern=r"\S",
                                 description="The device family (a plugin's).")]
 

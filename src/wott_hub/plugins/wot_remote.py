@@ -20,7 +20,7 @@ from typing import Annotated, Any, ClassVar
 
 from slugify import slugify
 
-from wott_hub.drivers.remote import FAMILY, RemoteWoTDriver, tactile_affordances
+from wott_hub.drivers.remote import FAMILY, MAX_NODES, MAX_TD_BYTES, RemoteWoTDriver, tactile_affordances
 
 from .model import DeviceConfig, FamilyInfo
 from .naming import naming_device
@@ -53,6 +53,13 @@ class RemoteSettings(SettingsModel):
         "rounding step of the packets."))] | None = None
     thickness_mm: Annotated[float, Meta(gt=0, le=100, description=(
         "Skin thickness for the force model (not in a Tactile TD)."))] = 3.0
+    max_nodes: Annotated[int, Meta(ge=1, le=1_000_000, description=(
+        "Largest mesh adopted, nodes (at most 4 cells per node); a device with more is refused "
+        "before its mesh is built. Devices found by discovery get [discovery] max_adopted_nodes."
+    ))] = MAX_NODES
+    max_td_bytes: Annotated[int, Meta(ge=1024, le=64 * 1024 * 1024, description=(
+        "Largest TD read from the device, bytes (with url; a TD given inline is the config's)."
+    ))] = MAX_TD_BYTES
 
 
 SCHEMA: dict[str, Any] = settings_schema(RemoteSettings)
@@ -78,4 +85,5 @@ def open_device(config: DeviceConfig) -> RemoteWoTDriver:
         s = read_settings(RemoteSettings, config.settings)
     return RemoteWoTDriver(config.id, td=s.td, url=s.url, title=s.title, timeout_s=s.timeout_s,
                            idle_timeout_s=s.idle_timeout_s, epsilon_mm=s.epsilon_mm,
-                           thickness_mm=s.thickness_mm, token=s.token)
+                           thickness_mm=s.thickness_mm, token=s.token, max_nodes=s.max_nodes,
+                           max_td_bytes=s.max_td_bytes)

@@ -32,7 +32,7 @@ from .scopes import Scope
 from .tokens import StoredToken, TokenStore
 
 __all__ = ["BEARER", "BEARER_EITHER", "BEARER_QUERY", "CONTROL_ACTIONS", "AccessPolicy", "Decision",
-           "Principal", "allows"]
+           "Principal", "allows", "credential"]
 
 BEARER = "bearer_sc"
 BEARER_QUERY = "bearer_query_sc"
@@ -65,7 +65,7 @@ ANONYMOUS = Principal("-", Scope.ADMIN)  # open mode: everyone may do everything
 
 @dataclass(frozen=True)
 class Decision:
-    status: int  # 200: admitted; 401 or 403: refused
+    status: int  # 200: admitted; 401 or 403: refused; 503: too many token checks waiting
     principal: Principal | None = None
     reason: str = ""
     required: Scope | None = None
@@ -116,18 +116,35 @@ class AccessPolicy:
             return Scope.ADMIN
         return self.action_scopes.get(path, Scope.CONTROL)
 
-    def admit(self, method: str, path: str, headers: Mapping[str, str],
-              query_token: str | None = None) -> Decision:
+    def to_check(self, method: str, path: str, headers: Mapping[str, str],
+                 query_token: str | None = None) -> str | None:
+        """The token a request carries when admitting it needs a hash first (``TokenStore.verify_async``,
+        off the event loop); None when ``admit`` can answer at once (open mode, a public route, no
+        token, a token whose answer is remembered)."""
+        if not self.enforced or self.store is None or self.required(method, path) is None:
+            return None
+        token = credential(headers, query_token)
+        if not token or self.store.known(token)[0]:
+            return None
+        return token
+
+    def admit(self, method: str, path: str, headers: Mapping[str, str], query_token: str | None = None, *,
+              checked: tuple[StoredToken | None] | None = None) -> Decision:
+        """Admit or refuse a request. ``checked``: the answer ``verify_async`` gave for its token (the
+        gate's way: the hash ran off the loop); without it a token is checked here (``verify``)."""
         if not self.enforced:
             return Decision(200, ANONYMOUS)
         required = self.required(method, path)
         if required is None:
             return Decision(200, None)
-        token = _bearer(headers.get("Authorization")) or query_token
+        token = credential(headers, query_token)
         if not token:
             return Decision(401, None, "this route needs 'Authorization: Bearer <token>' "
                                        f"(or ?{QUERY_PARAM}=<token>)", required)
-        stored = self.store.verify(token) if self.store is not None else None
+        if checked is not None:
+            stored = checked[0]
+        else:
+            stored = self.store.verify(token) if self.store is not None else None
         if stored is None:
             return Decision(401, None, "the bearer token is not valid", required, "invalid_token")
         principal = _principal(stored)
@@ -223,6 +240,11 @@ def _forms(td: dict[str, Any]) -> Iterator[dict[str, Any]]:
     for key in ("properties", "actions", "events"):
         for aff in (td.get(key) or {}).values():
             yield from aff.get("forms") or ()
+
+
+def credential(headers: Mapping[str, str], query_token: str | None = None) -> str | None:
+    """The token a request presents: ``Authorization: Bearer``, else ``?access_token=``."""
+    return _bearer(headers.get("Authorization")) or query_token or None
 
 
 def _bearer(header: str | None) -> str | None:

@@ -26,6 +26,11 @@ methods, messages, subscription ids and error codes, so wotpy's
 Things not served by the hub (produced directly on the servient) fall back to
 wotpy's own handlers.
 
+Removal ends every stream, as on SSE: when the Thing is no longer served (``removeDevice``),
+each of its subscriptions gets an end message (a ``SUBSCRIPTION_ERROR`` with
+``data: {"subscription": id, "ended": "removed"}``: wotpy's client hands it to the
+subscriber's ``on_error``) and the socket is closed with 1001 (going away).
+
 Bad input never costs the connection: a message that does not parse (nested
 too deep for the decoder included) gets a JSON-RPC error reply, and any failure
 while handling one is answered ``INTERNAL_ERROR`` and logged; a URL naming no
@@ -309,10 +314,21 @@ class FastWebsocketHandler(WebsocketHandler):
             pass
         finally:
             sub.close()
-            self._hub_subs.pop(sid, None)
+            ours = self._hub_subs.pop(sid, None) is not None  # not disposed by the client
         if sub.overflowed:
             self._send(_error("subscriber too slow: subscription closed", WebsocketErrors.SUBSCRIPTION_ERROR,
                               data={"subscription": sid}))
+        elif ours and self.ws_connection is not None and thing not in self.ctx.things.by_id:
+            self._ended(sid, thing)
+
+    def _ended(self, sid: str, thing: str) -> None:
+        """The Thing was removed (``removeDevice``): the subscription's end message (a subscription
+        error naming it, which wotpy's client passes to the subscriber's ``on_error``, as an SSE stream
+        ends), then, once no subscription is left, the socket is closed (1001: the Thing went away)."""
+        self._send(_error(f"Thing {thing!r} was removed: subscription ended",
+                          WebsocketErrors.SUBSCRIPTION_ERROR, data={"subscription": sid, "ended": "removed"}))
+        if not self._hub_subs and self.ws_connection is not None:
+            self.close(1001, f"Thing {thing!r} was removed")
 
     def on_close(self) -> None:
         for sub in list(self._hub_subs.values()):

@@ -39,16 +39,27 @@ as fast as read. A simulator with ``realtime = false`` uses its scene time.
 The rest reference survives a reconnect (the camera did not move relative to
 the skin); only the tracker restarts from it. Nothing here imports cv2: the
 reader that ``open_source`` makes does, in the worker thread.
+
+A source that never opens (a FIFO nobody writes, a stream URL that black-holes) must
+not make the device impossible to remove or the hub impossible to stop. So the
+worker thread is a daemon thread of the driver's own (``_Worker``), never the event
+loop's default executor, whose threads the interpreter joins at exit; a source is
+opened outside the lock that guards the reader, so ``close()`` never waits for an
+open; and releasing a reader (``close()``, the end of ``frames()``) waits at most
+``RELEASE_TIMEOUT_S`` (a reader stuck in a read keeps the lock). Whatever is still
+stuck then is left to its daemon thread: an open that returns after ``close()``
+releases what it opened.
 """
 
 from __future__ import annotations
 
 import abc
 import asyncio
+import queue
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
@@ -64,10 +75,85 @@ from wott_hub.plugin_api import (
     Tareable,
 )
 
-__all__ = ["BELOW_THRESHOLD_FLOOR", "LOST_FRACTION_DEGRADED", "CameraDriver", "FrameReader"]
+__all__ = ["BELOW_THRESHOLD_FLOOR", "LOST_FRACTION_DEGRADED", "RELEASE_TIMEOUT_S", "CameraDriver",
+           "FrameReader"]
 
 LOST_FRACTION_DEGRADED = 0.1
 BELOW_THRESHOLD_FLOOR = 0.75  # x epsilon: above the image-noise floor at rest of both families
+RELEASE_TIMEOUT_S = 2.0
+"""Longest wait for a reader's release (``close()``); a reader stuck in a read is left behind."""
+
+T = TypeVar("T")
+
+
+class _Worker:
+    """A driver's blocking calls (open, read, estimate), in order, on one daemon thread of its own.
+
+    A call that never returns (an open that hangs) holds only this thread, and a daemon
+    thread does not keep the process alive at exit; an awaiting coroutine that is
+    cancelled stops waiting at once (the call's result is then dropped)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._jobs: queue.SimpleQueue[tuple[Callable[[], Any], asyncio.Future[Any]] | None] | None = None
+
+    def call(self, fn: Callable[[], T]) -> asyncio.Future[T]:
+        fut: asyncio.Future[T] = asyncio.get_running_loop().create_future()
+        if self._jobs is None:  # each thread its own queue: a stopped one still stuck takes no new call
+            self._jobs = queue.SimpleQueue()
+            threading.Thread(target=self._run, args=(self._jobs,), name=self.name, daemon=True).start()
+        self._jobs.put((fn, fut))
+        return fut
+
+    def stop(self) -> None:
+        """The thread ends after the call it is in, if any (a new ``call`` starts another)."""
+        if self._jobs is not None:
+            self._jobs.put(None)
+            self._jobs = None
+
+    @staticmethod
+    def _run(jobs: queue.SimpleQueue[tuple[Callable[[], Any], asyncio.Future[Any]] | None]) -> None:
+        while (job := jobs.get()) is not None:
+            fn, fut = job
+            try:
+                value, error = fn(), None
+            except BaseException as e:  # handed to the awaiting coroutine
+                value, error = None, e
+            try:
+                fut.get_loop().call_soon_threadsafe(_settle, fut, value, error)
+            except RuntimeError:  # the loop is closed: nobody waits any more
+                pass
+
+
+def _settle(fut: asyncio.Future[Any], value: Any, error: BaseException | None) -> None:
+    if fut.cancelled():
+        return
+    if error is not None:
+        fut.set_exception(error)
+    else:
+        fut.set_result(value)
+
+
+async def _bounded(fn: Callable[[], None], timeout_s: float) -> bool:
+    """``fn()`` on a daemon thread of its own, waited for ``timeout_s`` at most; False if it did not end."""
+    done = asyncio.Event()
+    loop = asyncio.get_running_loop()
+
+    def run() -> None:
+        try:
+            fn()
+        finally:
+            try:
+                loop.call_soon_threadsafe(done.set)
+            except RuntimeError:  # the loop is closed
+                pass
+
+    threading.Thread(target=run, name="camera-release", daemon=True).start()
+    try:
+        await asyncio.wait_for(done.wait(), timeout_s)
+        return True
+    except TimeoutError:
+        return False
 
 
 class FrameReader(Protocol):
@@ -140,6 +226,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         self._reader: FrameReader | None = None
         self._lock = threading.Lock()  # a reader is never released while a thread reads it
         self._closed = asyncio.Event()
+        self._worker = _Worker(f"camera:{description.id}")
         self._wall0_ns = time.time_ns()
         self._mono0_ns = time.monotonic_ns()
         self._base_ns: int | None = None  # hub time of a recorded source's t_s = 0
@@ -202,12 +289,15 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         if self._prepare is not None:  # one-off start-up work (a depth calibration), off the event loop
             self._prepare()
             self._prepare = None
+        reader = self.open_source()  # not under the lock: an open that hangs must not hold up close()
+        opened = getattr(reader, "isOpened", None)
+        if opened is not None and not opened():
+            _release(reader)
+            raise _SourceLost(f"cannot open {self.source_name}")
         with self._lock:
-            reader = self.open_source()
-            opened = getattr(reader, "isOpened", None)
-            if opened is not None and not opened():
+            if self._closed.is_set():  # closed while it opened: nobody will read it
                 _release(reader)
-                raise _SourceLost(f"cannot open {self.source_name}")
+                raise _SourceLost(f"{self.source_name} is closed")
             self._reader = reader
             if getattr(reader, "recorded", False):  # continue after the last frame, on the hub clock
                 self._base_ns = max(self._wall0_ns + time.monotonic_ns() - self._mono0_ns,
@@ -304,20 +394,20 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                     return
                 if self._reader is None:
                     try:
-                        await asyncio.to_thread(self._open)
+                        await self._worker.call(self._open)
                     except Exception as e:  # any failure to open is a reason to retry, not to die
                         self.set_health(Health.disconnected, _reason(e, f"cannot open {self.source_name}"))
                         if await self._pause():
                             return
                         continue
                 try:
-                    frame = await asyncio.to_thread(self._step)
+                    frame = await self._worker.call(self._step)
                 except _SourceEnded:
                     return
                 except Exception as e:  # a driver never raises out of frames() for a transient fault
                     if self._closed.is_set():  # close() released the source under the read: not a fault
                         return
-                    await asyncio.to_thread(self._release)
+                    await self._worker.call(self._release)
                     self.set_health(Health.disconnected, _reason(e, f"{self.source_name} failed"))
                     self.reconnects += 1
                     if await self._pause():
@@ -330,11 +420,13 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                 self.frames_yielded += 1
                 yield frame
         finally:
-            await asyncio.to_thread(self._release)
+            await _bounded(self._release, RELEASE_TIMEOUT_S)
+            self._worker.stop()
 
     async def close(self) -> None:
         self._closed.set()
-        await asyncio.to_thread(self._release)
+        await _bounded(self._release, RELEASE_TIMEOUT_S)
+        self._worker.stop()
 
 
 def _release(reader: Any) -> None:
