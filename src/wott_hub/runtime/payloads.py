@@ -1,4 +1,5 @@
-"""The JSON texts of a frame's records, written straight from the processor's arrays.
+"""The JSON texts of a frame's records, written straight from the processor's arrays (and the
+numbers of its ``skinDisplacement`` packet, whose forms ``events.fields`` writes on demand).
 
 Contract: each function returns exactly ``events.record.encode`` of the payload the
 ``FrameResult`` describes (``skin_deformed_detection()``, ``contact_information()``), byte for
@@ -11,9 +12,12 @@ per contact first and encoding it costs 2-4x more (contacts: 11.6 against 6 µs;
 
 from __future__ import annotations
 
+import numpy as np
+
+from wott_hub.events.fields import FieldArrays
 from wott_hub.tactile import FrameResult
 
-__all__ = ["contacts_json", "skin_deformed_json"]
+__all__ = ["contacts_json", "displacement_field", "skin_deformed_json"]
 
 
 _NODE_HEADS: list[str] = []
@@ -55,3 +59,14 @@ def contacts_json(res: FrameResult) -> str:
     if "n" in where or "n" in force:  # "nan"/"inf": the only letters besides x, y, z there
         raise ValueError("Out of range float values are not JSON compliant")  # as encode() says
     return f'{{"numOfContacts":{len(contacts)},"contactLocations":[{where}],"contactForces":[{force}]}}'
+
+
+def displacement_field(res: FrameResult, displacement: np.ndarray) -> FieldArrays:
+    """The ``skinDisplacement`` packet of a frame: the skin packet's nodes (``res.deformed_nodes``)
+    with their vectors in µm, all zero in the release packet (the skin at rest). The norm of each
+    vector is the node's ``deformedNodeIntensity`` within the quantisation: both are rounded to
+    1 µm, the intensity from the exact norm, the vector per component (docs/tactile-td.md)."""
+    ids = res.deformed_nodes
+    if res.is_release:
+        return FieldArrays(ids.astype(np.int64, copy=False), np.zeros((len(ids), 3), np.int64))
+    return FieldArrays.of(ids, displacement[ids])
