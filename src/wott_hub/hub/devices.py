@@ -19,6 +19,7 @@ from wott_hub.errors import Conflict
 from wott_hub.runtime.capabilities import action_names
 from wott_hub.runtime.opening import open_driver
 from wott_hub.runtime.pipeline import CONTACTS, UNAVAILABLE, DevicePipeline
+from wott_hub.runtime.raw import RawRecorder, RawSource
 from wott_hub.servient import ServedThing, clean_td
 from wott_hub.td.builder import build_tactile_td, static_property_values
 
@@ -32,6 +33,7 @@ if TYPE_CHECKING:
     from wott_hub.runtime.pipeline import Report
     from wott_hub.runtime.pool import WorkerDevice, WorkerPool
     from wott_hub.tactile import DeviceDescription, FrameProcessor
+    from wott_hub.tactile.raw import RawSample
 
     from .recording import HubHistory
     from .things import Things
@@ -53,6 +55,8 @@ class DeviceRuntime:
     task: asyncio.Task[None] | None = None
     config: DeviceConfig | None = None  # what it was opened from (None: Hub.add_driver); restart reopens it
     actions: dict[str, Any] = field(default_factory=dict)  # device actions' counters (device_actions.py)
+    raw: RawSource | None = None  # its raw signals, read on demand (runtime/raw.py)
+    recorder: asyncio.Task[None] | None = None  # its images recorded at the rate it opted in to
 
     @property
     def driver(self) -> DeviceHandle:
@@ -146,8 +150,10 @@ class Devices:
         reopenable = config is not None  # restart opens it again from its config (here or in its worker)
         actions = action_names(pipeline.driver, reopenable=reopenable,
                                capabilities=worker.capabilities if worker is not None else None)
+        raw = _raw_source(tid, pipeline, worker)
         td = build_tactile_td(desc, base=f"{layout.http_base}/", forms=layout.factory(tid),
-                              context_url=layout.context_url, actions=actions)
+                              context_url=layout.context_url, actions=actions,
+                              raw=raw.signals if raw is not None else ())
         td["id"] = self.things.identity.device_id(tid)
         td["forms"] = layout.thing_forms(tid)
         if layout.mqtt is not None:
@@ -157,7 +163,8 @@ class Devices:
         static.pop(CONTACTS, None)
         static.pop(UNAVAILABLE, None)
         served = ServedThing.create(tid, td, static, record=record and self.config.history)
-        dev = DeviceRuntime(tid, family or desc.family, served, pipeline, worker, config=config)
+        dev = DeviceRuntime(tid, family or desc.family, served, pipeline, worker, config=config, raw=raw)
+        served.raw = raw
         served.dynamic[CONTACTS] = pipeline.read_contacts
         served.dynamic[UNAVAILABLE] = pipeline.read_unavailable
         self.things.serve(served)
@@ -171,6 +178,9 @@ class Devices:
         await self.history.attach(dev.thing, dev.family)
 
     def _run(self, dev: DeviceRuntime) -> None:
+        if dev.raw is not None and dev.recorder is None and RawRecorder(dev.id, dev.raw, self.plane).signals:
+            dev.recorder = asyncio.create_task(RawRecorder(dev.id, dev.raw, self.plane).run(),
+                                               name=f"raw-recorder:{dev.id}")
         if dev.worker is not None:  # its worker process runs it
             dev.pipeline.started()
             dev.worker.run(self.plane.trace)
@@ -179,6 +189,10 @@ class Devices:
                                        name=f"device:{dev.id}")
 
     async def _halt(self, dev: DeviceRuntime) -> None:
+        recorder, dev.recorder = dev.recorder, None
+        if recorder is not None:
+            recorder.cancel()
+            await asyncio.gather(recorder, return_exceptions=True)
         task, dev.task = dev.task, None
         if task is not None:
             task.cancel()
@@ -193,7 +207,7 @@ class Devices:
 
     async def stop(self) -> None:
         """Stop every pipeline and close every driver, then the worker processes."""
-        tasks = [d.task for d in self.running.values() if d.task is not None]
+        tasks = [t for d in self.running.values() for t in (d.task, d.recorder) if t is not None]
         for t in tasks:
             t.cancel()
         for d in self.running.values():
@@ -239,3 +253,17 @@ class Devices:
         for dev in self.running.values():
             if dev.worker is not None and dev.worker.worker == worker:
                 dev.pipeline.failed("its worker process exited")
+
+
+def _raw_source(thing: str, pipeline: DevicePipeline, worker: WorkerDevice | None) -> RawSource | None:
+    """The device's raw signals, sampled from its driver here or from its worker (None: it has none)."""
+    if worker is not None:
+        return RawSource(thing, worker.raw_signals, worker.raw_sample) if worker.raw_signals else None
+    signals = pipeline.raw_signals()
+    if not signals:
+        return None
+
+    async def sample(name: str) -> RawSample | None:
+        return pipeline.raw_sample(name)
+
+    return RawSource(thing, signals, sample)
