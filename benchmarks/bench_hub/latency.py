@@ -144,9 +144,13 @@ def scene_configs(n: int) -> list:
 
 async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool = True,
                        workers: int = 0, precomputed: bool = False, durability: str = "fast",
-                       worker_nice: int | None = None, history_process: bool = True) -> dict:
+                       worker_nice: int | None = None, history_process: bool = True,
+                       displacement: bool = False) -> dict:
     """``precomputed``: each device's FrameProcessor is replaced by a lookup of results computed
-    beforehand, to measure the hub's own path (plane, history, fan-out, sockets) alone."""
+    beforehand, to measure the hub's own path (plane, history, fan-out, sockets) alone.
+    ``displacement``: one more subscriber per device, to ``skinDisplacement`` (SSE, its JSON text),
+    through all the phases (a client process that reads and drops the bytes): the cost of the
+    vectors for a hub whose every device has a reader of them (issue 29)."""
     from dataclasses import replace
 
     from wott_hub.config import HubConfig
@@ -189,6 +193,12 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
         plane.add_tap(did, Keep(did))
 
     cpu: dict[str, tuple[float, float]] = {}  # client kind -> (hub, client) CPU, % of one core
+    drain = None
+    if displacement:  # subscribed before the phases, for all of them
+        phases = 2 + bool(with_wotpy)
+        drain = Client({"kind": "drain", "duration": phases * (duration + 2.0) + 2.0,
+                        "urls": [f"{hub.td_url(d)}/events/skinDisplacement" for d in ids]})
+        await drain.ready()
 
     async def phase(spec: dict) -> tuple[dict, int, int]:
         """One client at a time: the wotpy client alone can saturate a core of this machine."""
@@ -212,6 +222,9 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
                                        "urls": [hub.td_url(d) for d in ids]})
     else:  # the wotpy client cannot keep up with 8 devices already (its per-message validation)
         wot_res, w0, w1 = {"events": []}, 0, 0
+    if drain is not None:
+        drain.proc.kill()  # its window outlasts the phases: enough measured
+        drain.proc.wait(30)
     await hub.stop()
 
     def window(t0, t1):
@@ -360,7 +373,8 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
                                                                           "worker_nice": 0}))
             for label, kw in (*variants, ("processing precomputed", {"precomputed": True}),
                               ("history_durability = committed", {"durability": "committed"}),
-                              ("history_process = false", {"history_process": False})):
+                              ("history_process = false", {"history_process": False}),
+                              ("1 skinDisplacement subscriber per device", {"displacement": True})):
                 print(f"latency: {n} devices, {label} ...", flush=True)
                 w = await latency_ours(n, dur, tmp, with_wotpy=False, **kw)
                 variant_rows.append([n, label, f"{w['sse'][0] / dur:.0f} / {n * 120}", cell(w["sse"]),

@@ -19,7 +19,6 @@ import asyncio
 import contextlib
 import math
 import time
-from typing import Any
 
 import tornado.web
 from tornado.http1connection import HTTP1Connection
@@ -27,21 +26,22 @@ from tornado.httputil import HTTPServerRequest
 from tornado.iostream import StreamClosedError
 
 from wott_hub.errors import WottHubError
-from wott_hub.tactile.raw import IMAGE, RawSignal
-from wott_hub.td.raw import DEFAULT_RATE_HZ, MAX_RATE_HZ
-from wott_hub.types import RawReads
+from wott_hub.tactile.raw import GRID, IMAGE, RawSignal
+from wott_hub.td.raw import DEFAULT_RATE_HZ, MAX_RATE_HZ, RAW_IMAGE
+from wott_hub.types import Encoded, RawReads
 
+from .context import ServingContext
 from .http import SSE_OPEN, BaseHandler
 from .things import ServedThing
 
 __all__ = ["BOUNDARY", "RawPropertyHandler", "RawStreamHandler"]
 
 BOUNDARY = "frame"
-_FORMATS = {IMAGE: ("json", "png", "jpeg", "npy"), "grid": ("json", "npy")}
+_FORMATS = {IMAGE: ("json", "png", "jpeg", "npy"), GRID: ("json", "npy")}
 
 
 class _RawBase(BaseHandler):
-    def initialize(self, ctx: Any) -> None:
+    def initialize(self, ctx: ServingContext) -> None:
         self.ctx = ctx
 
     def raw_of(self, thing_id: str, name: str) -> tuple[ServedThing, RawReads]:
@@ -54,7 +54,7 @@ class _RawBase(BaseHandler):
 
     def signal(self, raw: RawReads, name: str) -> RawSignal:
         """The signal the request names: a camera (``camera``, default the first) or the grid."""
-        kind = IMAGE if name == "rawImage" else "grid"
+        kind = IMAGE if name == RAW_IMAGE else GRID
         signals = [s for s in raw.signals if s.kind == kind]
         if kind != IMAGE:
             return signals[0]
@@ -80,7 +80,7 @@ class _RawBase(BaseHandler):
                                                     f"second in (0, {MAX_RATE_HZ:g}], got {raw!r}")
         return rate
 
-    async def encoded(self, raw: RawReads, signal: RawSignal, fmt: str) -> Any:
+    async def encoded(self, raw: RawReads, signal: RawSignal, fmt: str) -> Encoded | None:
         try:
             return await raw.read(signal.name, fmt)
         except WottHubError as e:  # the device failed to give one: the device's fault, said as such

@@ -19,8 +19,8 @@ from typing import Any
 
 from wott_hub.tactile.raw import GRID, IMAGE, RawSignal
 
-__all__ = ["MAX_RATE_HZ", "PRESSURE_GRID", "RAW_IMAGE", "RAW_IMAGE_RECORDED", "RAW_TYPES", "raw_affordances",
-           "raw_events"]
+__all__ = ["DEFAULT_RATE_HZ", "MAX_RATE_HZ", "PRESSURE_GRID", "RAW_IMAGE", "RAW_IMAGE_RECORDED", "RAW_TYPES",
+           "raw_affordances", "raw_events"]
 
 RAW_IMAGE = "rawImage"
 PRESSURE_GRID = "pressureGrid"
@@ -31,6 +31,7 @@ RAW_TYPES = frozenset({"tac:RawImage", "tac:PressureGrid"})
 MAX_RATE_HZ = 120.0
 """The highest ``maxRate`` a stream accepts (a camera's frame rate at most: more repeats frames)."""
 DEFAULT_RATE_HZ = 10.0
+"""A stream's rate when the reader sets none: the device's frame rate up to this (a live view)."""
 
 
 def _max_rate(default: float) -> dict[str, Any]:
