@@ -178,9 +178,10 @@ class Devices:
         await self.history.attach(dev.thing, dev.family)
 
     def _run(self, dev: DeviceRuntime) -> None:
-        if dev.raw is not None and dev.recorder is None and RawRecorder(dev.id, dev.raw, self.plane).signals:
-            dev.recorder = asyncio.create_task(RawRecorder(dev.id, dev.raw, self.plane).run(),
-                                               name=f"raw-recorder:{dev.id}")
+        if dev.raw is not None and dev.recorder is None:  # a camera that opted in to recording its images
+            recorder = RawRecorder(dev.id, dev.raw, self.plane)
+            if recorder.signals:
+                dev.recorder = asyncio.create_task(recorder.run(), name=f"raw-recorder:{dev.id}")
         if dev.worker is not None:  # its worker process runs it
             dev.pipeline.started()
             dev.worker.run(self.plane.trace)
