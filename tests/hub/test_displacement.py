@@ -23,7 +23,7 @@ from wott_hub.events.fields import (
 from wott_hub.events.plane import EventPlane
 from wott_hub.events.record import KIND_EVENT, encode
 from wott_hub.examples import example_device
-from wott_hub.runtime.payloads import displacement_field
+from wott_hub.runtime.payloads import displacement_rows
 from wott_hub.runtime.pipeline import SKIN_DEFORMED, DevicePipeline
 from wott_hub.tactile import FrameProcessor, TactileFrame
 from wott_hub.tactile.indentation import Indenter, indent
@@ -55,7 +55,7 @@ def test_each_vector_is_its_nodes_displacement_and_its_norm_the_frames_intensity
         res = proc.process(frame)
         if not res.packet_due:
             continue
-        field = displacement_field(res, frame.displacement)
+        field = FieldArrays.of(*displacement_rows(res, frame.displacement))
         assert field.ids.tolist() == res.deformed_nodes.tolist()  # the same nodes, the same order
         if res.is_release:
             releases += 1
@@ -114,13 +114,18 @@ def test_the_pipeline_makes_the_record_only_when_wanted_and_as_numbers():
 
 
 def test_a_record_crosses_a_pipe_as_numbers_and_its_text_is_written_once_read():
-    field = FieldArrays.of(np.arange(20), np.random.default_rng(1).normal(0, 1, (20, 3)))
-    rec = FieldRecord("pad", 0, 10**18, field)
+    rows = (np.arange(20), np.random.default_rng(1).normal(0, 1, (20, 3)))
+    field = FieldArrays.of(*rows)
+    rec = FieldRecord("pad", 0, 10**18, rows=rows)  # as the pipeline makes it: not quantised yet
     back = pickle.loads(pickle.dumps(rec))  # a worker's pipe, the history process's
+    assert rec.wire()[0] == "mm" and rec._field is None  # quantised on the other side, when needed
     assert type(back) is FieldRecord and not back.text_built and not rec.text_built
     assert back.data == rec.data == displacement_json(10**18, field)
-    again = pickle.loads(pickle.dumps(back))  # a built text goes with it
-    assert again.text_built and again.data == rec.data
+    assert back.field.micro.tolist() == field.micro.tolist()
+    again = pickle.loads(pickle.dumps(back))  # a built text goes with it, and the numbers in µm
+    assert again.text_built and again.data == rec.data and back.wire()[0] == "um"
+    with pytest.raises(ValueError, match="one of them"):
+        FieldRecord("pad", 0, 1)
 
 
 def test_the_plane_numbers_it_and_its_binary_form_carries_that_seq():

@@ -40,7 +40,7 @@ from .record import KIND_EVENT, Record
 if TYPE_CHECKING:
     import numpy.typing as npt
 
-__all__ = ["CONTENT_TYPE", "HEADER", "MAGIC", "SKIN_DISPLACEMENT", "FieldArrays", "FieldRecord",
+__all__ = ["CONTENT_TYPE", "HEADER", "MAGIC", "SKIN_DISPLACEMENT", "FieldArrays", "FieldRecord", "Wire",
            "displacement_json", "field_of_text", "packet_bytes"]
 
 SKIN_DISPLACEMENT = "skinDisplacement"
@@ -116,21 +116,44 @@ def field_of_text(data: str) -> FieldArrays | None:
     return field
 
 
+Wire = tuple[str, bytes, bytes]
+"""A record's numbers across a pipe: ``("mm", ids, float64 mm)`` as the pipeline made them, or
+``("um", ids, int64 µm)`` once quantised."""
+
+
 class FieldRecord(Record):
     """A ``skinDisplacement`` record made from its numbers: ``data`` (the JSON text) and ``binary()``
-    are written on first use and kept (the plane's ring, every subscriber and history share them)."""
+    are written on first use and kept (the plane's ring, every subscriber and history share them).
 
-    __slots__ = ("_bin", "field")
+    The pipeline hands over the vectors as it has them (``rows``: node ids and their mm rows, a
+    copy): quantising them to µm (``field``) is left to whoever needs the numbers first, so a
+    record that only goes to history is quantised in the history process, off the hub's loop."""
 
-    def __init__(self, thing: str, seq: int, t_ns: int, field: FieldArrays,
-                 trace: dict[str, int] | None = None, data: str | None = None) -> None:
+    __slots__ = ("_bin", "_field", "_rows")
+
+    def __init__(self, thing: str, seq: int, t_ns: int, field: FieldArrays | None = None,
+                 trace: dict[str, int] | None = None, data: str | None = None, *,
+                 rows: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         super().__init__(thing, seq, KIND_EVENT, SKIN_DISPLACEMENT, t_ns, "", trace)
-        self.field = field
+        if (field is None) == (rows is None):
+            raise ValueError("a FieldRecord is made from its field or from its rows, one of them")
+        self._field = field
+        self._rows = rows
         self._bin: bytes | None = None
         if data is None:
             del self.data  # written by ``__getattr__`` when first read
         else:
             self.data = data
+
+    @property
+    def field(self) -> FieldArrays:
+        """The packet's numbers in µm (quantised here the first time they are needed)."""
+        field = self._field
+        if field is None:
+            assert self._rows is not None  # one of the two is always set
+            field = self._field = FieldArrays.of(*self._rows)
+            self._rows = None
+        return field
 
     def __getattr__(self, name: str) -> Any:
         if name == "data":  # the slot is empty until the text is first read
@@ -154,11 +177,23 @@ class FieldRecord(Record):
             out = self._bin = packet_bytes(self.seq, self.t_ns, self.field)
         return out
 
+    def wire(self) -> Wire:
+        """The numbers as raw bytes, to cross a pipe (pickling arrays costs ~4x more on each side)."""
+        rows = self._rows
+        if rows is not None:
+            return ("mm", np.asarray(rows[0], np.int64).tobytes(), np.asarray(rows[1], np.float64).tobytes())
+        return ("um", *self.field.to_wire())
+
+    @classmethod
+    def revive(cls, thing: str, seq: int, t_ns: int, wire: Wire, trace: dict[str, int] | None = None,
+               data: str | None = None) -> FieldRecord:
+        """The record ``wire()`` describes (its text too, if it had been written)."""
+        kind, ids, values = wire
+        if kind == "mm":
+            rows = (np.frombuffer(ids, np.int64), np.frombuffer(values, np.float64).reshape(-1, 3))
+            return cls(thing, seq, t_ns, None, trace, data, rows=rows)
+        return cls(thing, seq, t_ns, FieldArrays.from_wire((ids, values)), trace, data)
+
     def __reduce__(self) -> tuple[Any, ...]:
         data = self.data if self.text_built else None
-        return (_revive_field, (self.thing, self.seq, self.t_ns, self.field.to_wire(), self.trace, data))
-
-
-def _revive_field(thing: str, seq: int, t_ns: int, wire: tuple[bytes, bytes], trace: dict[str, int] | None,
-                  data: str | None) -> FieldRecord:
-    return FieldRecord(thing, seq, t_ns, FieldArrays.from_wire(wire), trace, data)
+        return (FieldRecord.revive, (self.thing, self.seq, self.t_ns, self.wire(), self.trace, data))

@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from wott_hub.events.fields import FieldArrays
 from wott_hub.tactile import FrameResult
 
-__all__ = ["contacts_json", "displacement_field", "skin_deformed_json"]
+__all__ = ["contacts_json", "displacement_rows", "skin_deformed_json"]
 
 
 _NODE_HEADS: list[str] = []
@@ -61,12 +60,14 @@ def contacts_json(res: FrameResult) -> str:
     return f'{{"numOfContacts":{len(contacts)},"contactLocations":[{where}],"contactForces":[{force}]}}'
 
 
-def displacement_field(res: FrameResult, displacement: np.ndarray) -> FieldArrays:
-    """The ``skinDisplacement`` packet of a frame: the skin packet's nodes (``res.deformed_nodes``)
-    with their vectors in µm, all zero in the release packet (the skin at rest). The norm of each
-    vector is the node's ``deformedNodeIntensity`` within the quantisation: both are rounded to
-    1 µm, the intensity from the exact norm, the vector per component (docs/tactile-td.md)."""
+def displacement_rows(res: FrameResult, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ``skinDisplacement`` packet of a frame as the pipeline hands it over: the skin packet's nodes
+    (``res.deformed_nodes``) and their rows of ``displacement`` (mm, a copy), all zero in the release
+    packet (the skin at rest); ``events.fields.FieldArrays.of`` quantises them to µm when first
+    needed. The norm of each quantised vector is the node's ``deformedNodeIntensity`` within the
+    quantisation: both are rounded to 1 µm, the intensity from the exact norm, the vector per
+    component (docs/tactile-td.md)."""
     ids = res.deformed_nodes
     if res.is_release:
-        return FieldArrays(ids.astype(np.int64, copy=False), np.zeros((len(ids), 3), np.int64))
-    return FieldArrays.of(ids, displacement[ids])
+        return ids, np.zeros((len(ids), 3))
+    return ids, displacement[ids]

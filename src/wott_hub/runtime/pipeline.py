@@ -56,7 +56,7 @@ from wott_hub.tactile import FrameError, FrameProcessor, FrameResult
 from wott_hub.types import FrameSink
 
 from .opening import CLOSE_TIMEOUT_S, restart_backoff
-from .payloads import contacts_json, displacement_field, skin_deformed_json
+from .payloads import contacts_json, displacement_rows, skin_deformed_json
 
 if TYPE_CHECKING:
     from wott_hub.types import RecordSink
@@ -327,7 +327,7 @@ class DevicePipeline:
             put(Record(thing, 0, KIND_EVENT, SKIN_DEFORMED, t_ns, data, trace,
                        SkinArrays(res.deformed_nodes, res.intensity)))
         if res.packet_due and displacement is not None and wants(thing, KIND_EVENT, SKIN_DISPLACEMENT):
-            put(FieldRecord(thing, 0, t_ns, displacement_field(res, displacement)))
+            put(FieldRecord(thing, 0, t_ns, rows=displacement_rows(res, displacement)))
         if res.actions and wants(thing, KIND_EVENT, ACTION):
             for action in res.actions:
                 put(Record(thing, 0, KIND_EVENT, ACTION, t_ns, encode(action)))
