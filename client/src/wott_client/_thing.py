@@ -27,6 +27,7 @@ import httpx
 import numpy as np
 
 from ._binary import BinaryStream
+from ._bulk import BulkReader
 from ._errors import ClientError, InvalidTD, NotFound, TransportError
 from ._fields import CONTENT_TYPE, Displacement, displacement_of_text
 from ._frames import Decoder, Item
@@ -49,6 +50,17 @@ def _problem(resp: httpx.Response) -> str:
         return str(body.get("detail") or body.get("title") or resp.text[:200])
     except ValueError:
         return resp.text[:200]
+
+
+def _detail(body: bytes, content_type: str) -> str:
+    """A problem+json answer's detail, else the start of the body."""
+    if "json" in content_type:
+        try:
+            problem = json.loads(body)
+            return str(problem.get("detail") or problem.get("title") or body[:200])
+        except (ValueError, AttributeError):
+            pass
+    return body[:200].decode("utf-8", "replace")
 
 
 def _checked(resp: httpx.Response, what: str) -> httpx.Response:
@@ -78,7 +90,8 @@ async def get_json(http: httpx.AsyncClient, url: str) -> tuple[Any, httpx.Respon
 class AsyncThing:
     """One Tactile Thing, from its TD (``AsyncClient.async_thing`` fetches one by URL or mDNS name)."""
 
-    def __init__(self, td: dict[str, Any], http: httpx.AsyncClient, url: str | None = None) -> None:
+    def __init__(self, td: dict[str, Any], http: httpx.AsyncClient, url: str | None = None,
+                 bulk: BulkReader | None = None) -> None:
         if not isinstance(td, dict) or not is_tactile(td):
             raise InvalidTD(f"{url or 'TD'}: not a Tactile Thing (needs skinNodes and skinDeformedDetection)")
         self.td = td
@@ -86,6 +99,7 @@ class AsyncThing:
         self.id: str = str(td.get("id") or td.get("title") or url)
         self.title: str = str(td.get("title", self.id))
         self._http = http
+        self._bulk = bulk  # large binary reads (raw images); made from the client's token if not given
         self._mesh: Mesh | None = None
         self.streams: list[ResumableStream] = []  # of the last async_frames(), for inspection
 
@@ -163,13 +177,17 @@ class AsyncThing:
         if form is None:
             raise InvalidTD(f"{self.id}: property {name!r} has no {NPY} form")
         url = form.expand(**variables)
+        if self._bulk is None:
+            token = {k: v for k, v in self._http.headers.items() if k.lower() == "authorization"}
+            self._bulk = BulkReader(token)
+        status, ctype, body = await self._bulk.get(url, {"Accept": NPY})
+        if status >= 400:
+            detail = _detail(body, ctype)
+            if status == 404:
+                raise NotFound(f"{self.id} {name}: 404: {detail}")
+            raise TransportError(f"{self.id} {name}: HTTP {status}: {detail}")
         try:
-            resp = await self._http.get(url, headers={"Accept": NPY})
-        except httpx.HTTPError as e:
-            raise TransportError(f"{url}: {e!r}") from None
-        _checked(resp, f"{self.id} {name}")
-        try:
-            array: np.ndarray = np.load(io.BytesIO(resp.content), allow_pickle=False)
+            array: np.ndarray = np.load(io.BytesIO(body), allow_pickle=False)
         except ValueError as e:
             raise TransportError(f"{url}: not a .npy array: {e}") from None
         return array

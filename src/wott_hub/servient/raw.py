@@ -101,6 +101,9 @@ class RawPropertyHandler(_RawBase):
         if enc is None:
             self.set_header("Retry-After", "1")
             raise tornado.web.HTTPError(503, reason=f"{name} {signal.name!r}: no frame yet")
+        conn = self.request.connection
+        if isinstance(conn, HTTP1Connection):  # the response's last segment at once, not after an ACK
+            conn.stream.set_nodelay(True)
         self.set_header("Content-Type", enc.content_type)
         self.set_header("Cache-Control", "no-store")
         self.set_header("X-Timestamp-Ns", str(enc.t_ns))
