@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import random
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -338,8 +339,29 @@ async def latency_plain(n_dev: int, duration: float) -> dict:
             "ws_p99": pct(lat, 99)}
 
 
+async def displacement_ab(n: int, dur: float, tmp: Path, pairs: int = 3) -> list:
+    """Issue 29's cost rule at ``n`` devices: ``pairs`` alternated runs without and with one
+    ``skinDisplacement`` subscriber per device; the row of medians (frames/s processed, SSE p99)
+    and the drop in frames processed."""
+    fps: dict[bool, list[float]] = {False: [], True: []}
+    p99: dict[bool, list[float]] = {False: [], True: []}
+    for k in range(pairs):
+        for sub in (False, True):
+            print(f"latency: {n} devices, skinDisplacement subscribers {sub}, pair {k + 1} ...", flush=True)
+            r = await latency_ours(n, dur, tmp, with_wotpy=False, displacement=sub)
+            fps[sub].append(r["sse"][0] / dur)
+            p99[sub].append(r["sse"][3])
+    med = statistics.median
+    drop = 100 * (1 - med(fps[True]) / med(fps[False]))
+    return [n, " · ".join(f"{x:.0f}" for x in fps[False]), " · ".join(f"{x:.0f}" for x in fps[True]),
+            f"{med(fps[False]):.0f} → {med(fps[True]):.0f} ({drop:+.1f} % fewer)" if drop >= 0 else
+            f"{med(fps[False]):.0f} → {med(fps[True]):.0f} ({-drop:.1f} % more)",
+            f"{report.ms(med(p99[False]))} → {report.ms(med(p99[True]))}"]
+
+
 async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
-              duration: float | None = None, workers: tuple[int, ...] | None = None) -> dict:
+              duration: float | None = None, workers: tuple[int, ...] | None = None,
+              ab: bool = False) -> dict:
     """Every point of ``devices`` (default 1, 8, 32, 64; 1, 8 when quick); the report's rows.
     Points from 8 devices on also run once per count of ``workers`` (default 1 and 2), the
     most workers once more with ``worker_nice = 0`` (at the hub's CPU priority), with the
@@ -348,7 +370,7 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
     ``history_process = false`` (batches written by the writer's thread, docs/history.md)."""
     dur = duration if duration is not None else (2.0 if quick else 6.0)
     points = devices or (QUICK_DEVICES if quick else DEFAULT_DEVICES)
-    rows, stage_rows, variant_rows, repeats = [], [], [], []
+    rows, stage_rows, variant_rows, repeats, ab_rows = [], [], [], [], []
     cell, ms = report.cell, report.ms
     for n in points:
         print(f"latency: {n} devices ...", flush=True)
@@ -383,10 +405,13 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
                                          w["stages"]["processing"], w["stages"]["fanout"],
                                          w["stages"]["transport"])), cpu_cell(w)])
                 print(variant_rows[-1], flush=True)
+        if ab:
+            ab_rows.append(await displacement_ab(n, dur, tmp))
+            print(ab_rows[-1], flush=True)
         st, ws = r["stages"], r["ws_stages"]
         stage_rows.append([n, *(f"{ms(a)} / {ms(b)}" for a, b in (
             st["processing"], st["encoding"], st["fanout"], st["transport"], st["decode"],
             ws["fanout"], ws["transport"], r["wotpy_after_write"])), ms(r["wotpy_decode"])])
         print(rows[-1], stage_rows[-1], flush=True)
     return {"duration": dur, "rows": rows, "stage_rows": stage_rows, "variant_rows": variant_rows,
-            "repeats": repeats}
+            "repeats": repeats, "ab_rows": ab_rows}
