@@ -345,17 +345,21 @@ async def displacement_ab(n: int, dur: float, tmp: Path, pairs: int = 3) -> list
     and the drop in frames processed."""
     fps: dict[bool, list[float]] = {False: [], True: []}
     p99: dict[bool, list[float]] = {False: [], True: []}
+    cpu: dict[bool, list[float]] = {False: [], True: []}  # hub CPU per frame processed, µs
     for k in range(pairs):
         for sub in (False, True):
             print(f"latency: {n} devices, skinDisplacement subscribers {sub}, pair {k + 1} ...", flush=True)
             r = await latency_ours(n, dur, tmp, with_wotpy=False, displacement=sub)
             fps[sub].append(r["sse"][0] / dur)
             p99[sub].append(r["sse"][3])
+            cpu[sub].append(1e4 * r["cpu"]["sse-lean"][0] / max(1.0, r["sse"][0] / dur))
     med = statistics.median
     drop = 100 * (1 - med(fps[True]) / med(fps[False]))
+    more = 100 * (med(cpu[True]) / med(cpu[False]) - 1)
     return [n, " · ".join(f"{x:.0f}" for x in fps[False]), " · ".join(f"{x:.0f}" for x in fps[True]),
             f"{med(fps[False]):.0f} → {med(fps[True]):.0f} ({drop:+.1f} % fewer)" if drop >= 0 else
             f"{med(fps[False]):.0f} → {med(fps[True]):.0f} ({-drop:.1f} % more)",
+            f"{med(cpu[False]):.0f} → {med(cpu[True]):.0f} ({more:+.0f} %)",
             f"{report.ms(med(p99[False]))} → {report.ms(med(p99[True]))}"]
 
 

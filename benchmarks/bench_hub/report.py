@@ -57,7 +57,11 @@ def latency(res: dict) -> str:
         out += ("\n\nOne `skinDisplacement` subscriber per device (issue 29; SSE, its JSON text), three runs "
                 "without and with alternated, medians:\n\n"
                 + markdown_table(["devices", "frames/s, none", "frames/s, one per device",
-                                  "frames/s processed (median)", "hub SSE p99"], res["ab_rows"]))
+                                  "frames/s processed (median)", "hub CPU µs per frame (median)",
+                                  "hub SSE p99"], res["ab_rows"])
+                + "\n\nHub CPU per frame: the hub process's and its history process's CPU time in the SSE "
+                  "client's window over the frames processed then (what the cost is on a machine that "
+                  "has the cores; frames processed is what it becomes on one that has not).")
     return out
 
 
