@@ -18,7 +18,11 @@ incremental auto-vacuum):
 - resume: records/s of ``HistoryReader.rows`` (the SSE resume backlog), 5,000 a page;
 - replay: ``Replayer`` at speed 0 (as fast as possible) over the whole range, emitting
   into nothing: what the hub's replay costs beyond publishing (the median of 3 runs);
-- MCAP: ``export_mcap`` of the whole range with the Foxglove scene channels (30 Hz).
+- MCAP: ``export_mcap`` of the whole range with the Foxglove scene channels (30 Hz);
+- vector records (issue 29): the skin packets again as ``skinDisplacement`` records (the same
+  nodes, a vector each, as the pipeline makes them: ``FieldRecord``, packed by
+  ``history/field_codec.py``) against the intensity packets alone, in files of their own, runs
+  alternated (intensity, vectors, three times): bytes per record, write and replay rates.
 
     uv run wott-hub bench storage [--minutes 60]
 """
@@ -119,6 +123,51 @@ def text_only(tmp: Path, recs) -> dict:
     return {"mode": "after, text only", "write_rate": len(recs) / write_s}
 
 
+def vector_records(skins) -> list:
+    """The ``skinDisplacement`` records of the intensity packets ``skins``: the same frames and nodes,
+    a vector per node whose norm is the node's intensity (random directions, some shear)."""
+    import numpy as np
+
+    from wott_hub.events.fields import FieldArrays, FieldRecord
+
+    rng = np.random.default_rng(11)
+    out = []
+    for r in skins:
+        ids, inten = r.skin
+        d = rng.normal(0, 1, (len(ids), 3))
+        d *= (np.asarray(inten) / np.linalg.norm(d, axis=1))[:, None]
+        out.append(FieldRecord(r.thing, r.seq, r.t_ns, FieldArrays.of(ids, d)))
+    return out
+
+
+def vectors_against_intensity(tmp: Path, skins, vecs) -> list[list[str]]:
+    """Rows: per kind, bytes per record, write and replay rates (medians of three alternated runs)."""
+    from wott_hub.history import HistoryReader, Replayer
+
+    runs: dict[str, dict[str, list[float]]] = {}
+    for k in range(3):
+        for kind, recs in (("skinDeformedDetection (intensity)", skins),
+                           ("skinDisplacement (vectors)", vecs)):
+            engine, w = _writer(tmp / f"vec-{k}-{kind[:8]}.db", True)
+            base = _used(engine)
+            write_s = _write(engine, w, recs)
+            w.stop()
+            used = (_used(engine) - base) / len(recs)
+            rp = Replayer(HistoryReader(engine), "dev", speed=0)
+            t0 = time.perf_counter()
+            asyncio.run(rp.run(lambda r: None))
+            replay_s = time.perf_counter() - t0
+            assert rp.emitted == len(recs)
+            engine.dispose()
+            got = runs.setdefault(kind, {"bytes": [], "write": [], "replay": []})
+            got["bytes"].append(used)
+            got["write"].append(len(recs) / write_s)
+            got["replay"].append(len(recs) / replay_s)
+    med = statistics.median
+    return [[kind, f"{med(r['bytes']):.0f}", f"{med(r['write']):,.0f}", f"{med(r['replay']):,.0f}"]
+            for kind, r in runs.items()]
+
+
 def one_mode(tmp: Path, compact: bool, recs, skins) -> dict:
     from wott_hub.events.record import KIND_EVENT
     from wott_hub.history import HistoryReader, Replayer
@@ -185,6 +234,7 @@ def main() -> None:
         mcap_mb = path.stat().st_size / 1e6
         for r in results:
             r["engine"].dispose()
+        vec_rows = vectors_against_intensity(tmp, skins, vector_records(skins))
     load_after = os.getloadavg()[0]
     hour = "one hour" if scale == 1 else f"{args.minutes:g} min (x{scale:g} = one hour)"
     rows = [[r["mode"], f"{r['skin_bytes']:.0f}", f"{r['bytes']:.0f}",
@@ -215,6 +265,14 @@ cores shared with other jobs make them vary by up to ~2x from run to run).
 MCAP export of the same {hour} (`export_mcap`, every record plus the Foxglove scene channels
 at 30 Hz: {summary.scene_messages:,} SceneUpdate messages, zstd chunks):
 {mcap_s * scale:.1f} s, {mcap_mb * scale:.0f} MB{" (scaled)" if scale != 1 else ""}.
+
+Vector records (issue 29): {len(skins):,} skin packets of 20 nodes, as intensity packets and as
+`skinDisplacement` packets (the same nodes with their vectors, ~2,300 B of JSON each, packed by
+`history/field_codec.py` and read back to the identical text), each kind in a file of its own
+(row and indexes included), three runs alternated, medians. Target: ≤ 400 B per 20-node vector
+record, the same write and replay rates as the intensity records.
+
+{markdown_table(["records", "B / record", "write (records/s)", "replay (records/s)"], vec_rows)}
 """
     print(body)
     if not args.no_doc:

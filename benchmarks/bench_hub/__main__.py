@@ -67,6 +67,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                          "workers = 0 is the main row)")
     ap.add_argument("--duration", type=_seconds, default=None, metavar="S",
                     help="latency group: seconds measured per point (default 6; 2 with --quick)")
+    ap.add_argument("--displacement-ab", action="store_true",
+                    help="latency group: also three runs without and with one skinDisplacement subscriber "
+                         "per device, alternated, at each device count (issue 29's cost rule)")
     ap.add_argument("--no-write", action="store_true", help="print only; do not update docs/benchmarks.md")
     args = ap.parse_args(argv)
     groups = [g.strip() for g in args.groups.split(",") if g.strip()]
@@ -83,7 +86,8 @@ async def run_groups(args: argparse.Namespace) -> list[str]:
     sections = []
     if "latency" in args.groups:
         sections.append(report.latency(await latency.run(tmp, quick=args.quick, devices=args.devices,
-                                                         duration=args.duration, workers=args.workers)))
+                                                         duration=args.duration, workers=args.workers,
+                                                         ab=args.displacement_ab)))
     if "throughput" in args.groups:
         sections.append(report.throughput(await throughput.run(tmp, quick=args.quick)))
     if "expose" in args.groups:
@@ -106,6 +110,8 @@ def _command(args: argparse.Namespace) -> str:
         cmd += " --workers " + ",".join(map(str, args.workers))
     if args.duration is not None:
         cmd += f" --duration {args.duration:g}"
+    if args.displacement_ab:
+        cmd += " --displacement-ab"
     return cmd
 
 

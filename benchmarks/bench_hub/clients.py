@@ -41,6 +41,8 @@ def client_main(spec: dict) -> None:
         res = asyncio.run(_ws_latency_client(spec["urls"], spec["event"], spec["duration"]))
     elif kind == "td-get":
         res = _td_get_client(spec["urls"], spec["n"])
+    elif kind == "drain":
+        res = asyncio.run(_drain_client(spec["urls"], spec["duration"]))
     else:
         raise SystemExit(f"unknown client {kind}")
     print(json.dumps({**res, **_CPU}), flush=True)
@@ -193,6 +195,30 @@ async def _lean_clients(urls: list[str], duration: float, make, request) -> dict
 async def _sse_lean_client(urls: list[str], duration: float) -> dict:
     return await _lean_clients(urls, duration, _LeanSSE, lambda path, host: (
         f"GET {path} HTTP/1.1\r\nHost: {host}\r\nAccept: text/event-stream\r\n\r\n").encode())
+
+
+async def _drain_client(urls: list[str], duration: float) -> dict:
+    """A subscriber that reads every byte of each stream and keeps none (one GET per URL, raw sockets):
+    the hub's cost of a subscriber with the least of the client's own."""
+    from urllib.parse import urlsplit
+
+    received = [0]
+
+    async def one(url: str) -> None:
+        u = urlsplit(url)
+        reader, writer = await asyncio.open_connection(u.hostname, u.port)
+        writer.write(f"GET {u.path} HTTP/1.1\r\nHost: {u.netloc}\r\n"
+                     "Accept: text/event-stream\r\n\r\n".encode())
+        try:
+            while chunk := await reader.read(1 << 16):
+                received[0] += len(chunk)
+        finally:
+            writer.close()
+
+    tasks = [asyncio.create_task(one(u)) for u in urls]
+    await asyncio.sleep(0.5)  # connected
+    await _measure(tasks, duration)
+    return {"bytes": received[0]}
 
 
 async def _wotpy_client(urls: list[str], duration: float, event: str) -> dict:

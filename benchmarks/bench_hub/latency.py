@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import random
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -144,9 +145,13 @@ def scene_configs(n: int) -> list:
 
 async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool = True,
                        workers: int = 0, precomputed: bool = False, durability: str = "fast",
-                       worker_nice: int | None = None, history_process: bool = True) -> dict:
+                       worker_nice: int | None = None, history_process: bool = True,
+                       displacement: bool = False) -> dict:
     """``precomputed``: each device's FrameProcessor is replaced by a lookup of results computed
-    beforehand, to measure the hub's own path (plane, history, fan-out, sockets) alone."""
+    beforehand, to measure the hub's own path (plane, history, fan-out, sockets) alone.
+    ``displacement``: one more subscriber per device, to ``skinDisplacement`` (SSE, its JSON text),
+    through all the phases (a client process that reads and drops the bytes): the cost of the
+    vectors for a hub whose every device has a reader of them (issue 29)."""
     from dataclasses import replace
 
     from wott_hub.config import HubConfig
@@ -189,6 +194,12 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
         plane.add_tap(did, Keep(did))
 
     cpu: dict[str, tuple[float, float]] = {}  # client kind -> (hub, client) CPU, % of one core
+    drain = None
+    if displacement:  # subscribed before the phases, for all of them
+        phases = 2 + bool(with_wotpy)
+        drain = Client({"kind": "drain", "duration": phases * (duration + 2.0) + 2.0,
+                        "urls": [f"{hub.td_url(d)}/events/skinDisplacement" for d in ids]})
+        await drain.ready()
 
     async def phase(spec: dict) -> tuple[dict, int, int]:
         """One client at a time: the wotpy client alone can saturate a core of this machine."""
@@ -212,6 +223,9 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
                                        "urls": [hub.td_url(d) for d in ids]})
     else:  # the wotpy client cannot keep up with 8 devices already (its per-message validation)
         wot_res, w0, w1 = {"events": []}, 0, 0
+    if drain is not None:
+        drain.proc.kill()  # its window outlasts the phases: enough measured
+        drain.proc.wait(30)
     await hub.stop()
 
     def window(t0, t1):
@@ -325,8 +339,33 @@ async def latency_plain(n_dev: int, duration: float) -> dict:
             "ws_p99": pct(lat, 99)}
 
 
+async def displacement_ab(n: int, dur: float, tmp: Path, pairs: int = 3) -> list:
+    """Issue 29's cost rule at ``n`` devices: ``pairs`` alternated runs without and with one
+    ``skinDisplacement`` subscriber per device; the row of medians (frames/s processed, SSE p99)
+    and the drop in frames processed."""
+    fps: dict[bool, list[float]] = {False: [], True: []}
+    p99: dict[bool, list[float]] = {False: [], True: []}
+    cpu: dict[bool, list[float]] = {False: [], True: []}  # hub CPU per frame processed, µs
+    for k in range(pairs):
+        for sub in (False, True):
+            print(f"latency: {n} devices, skinDisplacement subscribers {sub}, pair {k + 1} ...", flush=True)
+            r = await latency_ours(n, dur, tmp, with_wotpy=False, displacement=sub)
+            fps[sub].append(r["sse"][0] / dur)
+            p99[sub].append(r["sse"][3])
+            cpu[sub].append(1e4 * r["cpu"]["sse-lean"][0] / max(1.0, r["sse"][0] / dur))
+    med = statistics.median
+    drop = 100 * (1 - med(fps[True]) / med(fps[False]))
+    more = 100 * (med(cpu[True]) / med(cpu[False]) - 1)
+    return [n, " · ".join(f"{x:.0f}" for x in fps[False]), " · ".join(f"{x:.0f}" for x in fps[True]),
+            f"{med(fps[False]):.0f} → {med(fps[True]):.0f} ({drop:+.1f} % fewer)" if drop >= 0 else
+            f"{med(fps[False]):.0f} → {med(fps[True]):.0f} ({-drop:.1f} % more)",
+            f"{med(cpu[False]):.0f} → {med(cpu[True]):.0f} ({more:+.0f} %)",
+            f"{report.ms(med(p99[False]))} → {report.ms(med(p99[True]))}"]
+
+
 async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
-              duration: float | None = None, workers: tuple[int, ...] | None = None) -> dict:
+              duration: float | None = None, workers: tuple[int, ...] | None = None,
+              ab: bool = False) -> dict:
     """Every point of ``devices`` (default 1, 8, 32, 64; 1, 8 when quick); the report's rows.
     Points from 8 devices on also run once per count of ``workers`` (default 1 and 2), the
     most workers once more with ``worker_nice = 0`` (at the hub's CPU priority), with the
@@ -335,7 +374,7 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
     ``history_process = false`` (batches written by the writer's thread, docs/history.md)."""
     dur = duration if duration is not None else (2.0 if quick else 6.0)
     points = devices or (QUICK_DEVICES if quick else DEFAULT_DEVICES)
-    rows, stage_rows, variant_rows, repeats = [], [], [], []
+    rows, stage_rows, variant_rows, repeats, ab_rows = [], [], [], [], []
     cell, ms = report.cell, report.ms
     for n in points:
         print(f"latency: {n} devices ...", flush=True)
@@ -360,7 +399,8 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
                                                                           "worker_nice": 0}))
             for label, kw in (*variants, ("processing precomputed", {"precomputed": True}),
                               ("history_durability = committed", {"durability": "committed"}),
-                              ("history_process = false", {"history_process": False})):
+                              ("history_process = false", {"history_process": False}),
+                              ("1 skinDisplacement subscriber per device", {"displacement": True})):
                 print(f"latency: {n} devices, {label} ...", flush=True)
                 w = await latency_ours(n, dur, tmp, with_wotpy=False, **kw)
                 variant_rows.append([n, label, f"{w['sse'][0] / dur:.0f} / {n * 120}", cell(w["sse"]),
@@ -369,10 +409,13 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
                                          w["stages"]["processing"], w["stages"]["fanout"],
                                          w["stages"]["transport"])), cpu_cell(w)])
                 print(variant_rows[-1], flush=True)
+        if ab:
+            ab_rows.append(await displacement_ab(n, dur, tmp))
+            print(ab_rows[-1], flush=True)
         st, ws = r["stages"], r["ws_stages"]
         stage_rows.append([n, *(f"{ms(a)} / {ms(b)}" for a, b in (
             st["processing"], st["encoding"], st["fanout"], st["transport"], st["decode"],
             ws["fanout"], ws["transport"], r["wotpy_after_write"])), ms(r["wotpy_decode"])])
         print(rows[-1], stage_rows[-1], flush=True)
     return {"duration": dur, "rows": rows, "stage_rows": stage_rows, "variant_rows": variant_rows,
-            "repeats": repeats}
+            "repeats": repeats, "ab_rows": ab_rows}

@@ -53,6 +53,15 @@ def latency(res: dict) -> str:
                 + markdown_table(["devices", "variant", "frames/s", "hub SSE", "hub WS", "processing",
                                   "SSE fan-out", "SSE transport", "CPU % of a core, hub / client"],
                                  res["variant_rows"]))
+    if res.get("ab_rows"):
+        out += ("\n\nOne `skinDisplacement` subscriber per device (issue 29; SSE, its JSON text), three runs "
+                "without and with alternated, medians:\n\n"
+                + markdown_table(["devices", "frames/s, none", "frames/s, one per device",
+                                  "frames/s processed (median)", "hub CPU µs per frame (median)",
+                                  "hub SSE p99"], res["ab_rows"])
+                + "\n\nHub CPU per frame: the hub process's and its history process's CPU time in the SSE "
+                  "client's window over the frames processed then (what the cost is on a machine that "
+                  "has the cores; frames processed is what it becomes on one that has not).")
     return out
 
 

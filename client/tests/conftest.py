@@ -51,6 +51,29 @@ def hub():
     h.stop()
 
 
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A started HubThread with history: ``pad`` pressing, ``cam`` a simulated camera pad (10 frames/s)
+    and ``grid`` a simulated taxel array (issue 29: raw frames, history ranges, actions)."""
+    from wott_hub.config import HubConfig
+    from wott_hub.network import DiscoveryConfig
+    from wott_hub.plugins import DeviceConfig
+
+    cfg = HubConfig(http_port=0, ws_port=0, database=str(tmp_path_factory.mktemp("fields") / "hub.db"),
+                    history_batch_ms=20, discovery=DiscoveryConfig.off(), devices=(
+                        HELPERS._press_scene("pad"),
+                        DeviceConfig("cam", "flat-vision", {"source": "sim", "fps": 10.0}),
+                        DeviceConfig("grid", "taxel-array", {"simulate": True, "rate_hz": 30.0})))
+    h = HELPERS.HubThread(cfg).start()
+    yield h
+    h.stop()
+
+
+@pytest.fixture(scope="session")
+def eventually():
+    return HELPERS._eventually
+
+
 @pytest.fixture(scope="session")
 def device_sim():
     """``sim = await device_sim(name).start()`` ... ``await sim.stop()`` in the test's event loop:

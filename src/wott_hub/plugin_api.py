@@ -13,8 +13,9 @@ What is here, by the job it does in a plugin:
   a ``DriverError`` with the device and family);
 - the driver contract: ``Driver``, ``Health``, ``HealthStatus`` and the optional
   capabilities a driver may declare (``Retargetable``, ``Tareable``,
-  ``Recalibratable``, ``NoisyAtRest``, ``ReportsUnavailableNodes``); ``Backoff`` to
-  reconnect a transport;
+  ``Recalibratable``, ``NoisyAtRest``, ``ReportsUnavailableNodes``, ``ServesRawSignals``
+  with its ``RawSignal`` descriptions and ``RawSample`` values); ``Backoff`` to reconnect a
+  transport;
 - errors, all in the hub's one tree (``WottHubError``): ``SettingsError`` for a
   setting that cannot open a device, ``DriverError`` for a device that cannot be
   opened or run, ``InvalidInput`` for data that can never be right as given
@@ -44,9 +45,12 @@ from wott_hub.drivers.base import (
     Health,
     HealthStatus,
     NoisyAtRest,
+    RawSample,
+    RawSignal,
     Recalibratable,
     ReportsUnavailableNodes,
     Retargetable,
+    ServesRawSignals,
     Tareable,
 )
 from wott_hub.errors import InvalidInput, SettingsError, WottHubError
@@ -100,11 +104,14 @@ __all__ = [
     "MeshError",
     "Meta",
     "NoisyAtRest",
+    "RawSample",
+    "RawSignal",
     "Recalibratable",
     "ReportsUnavailableNodes",
     "Retargetable",
     "Scene",
     "SceneError",
+    "ServesRawSignals",
     "SettingsError",
     "SettingsModel",
     "SettingsTable",

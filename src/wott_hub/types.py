@@ -19,8 +19,9 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 if TYPE_CHECKING:  # annotations only: importing the events package here would be a cycle through it
     from wott_hub.events.record import Record
+    from wott_hub.tactile.raw import RawSignal
 
-__all__ = ["Direct", "Emit", "FormFactory", "FrameSink", "Invoke", "RecordSink"]
+__all__ = ["Direct", "Emit", "Encoded", "FormFactory", "FrameSink", "Invoke", "RawReads", "RecordSink"]
 
 
 class RecordSink(Protocol):
@@ -49,6 +50,34 @@ class FrameSink(RecordSink, Protocol):
 
     def frame_done(self) -> None:
         """The records ``put`` since the last call are one frame's."""
+        ...
+
+
+class Encoded(Protocol):
+    """One encoding of a raw sample (``runtime.raw.Encoded``): its frame time, bytes, media type."""
+
+    @property
+    def t_ns(self) -> int: ...
+
+    @property
+    def body(self) -> bytes: ...
+
+    @property
+    def content_type(self) -> str: ...
+
+
+class RawReads(Protocol):
+    """A device's raw signals as the servient serves them (``runtime.raw.RawSource``): read on demand,
+    encoded once per frame and format whatever the number of readers."""
+
+    @property
+    def signals(self) -> tuple[RawSignal, ...]:
+        """The device's raw signals (``tactile.raw.RawSignal``)."""
+        ...
+
+    async def read(self, name: str, fmt: str) -> Encoded | None:
+        """Signal ``name``'s latest sample in format ``fmt`` (``json``, ``png``, ``jpeg``, ``npy``), None
+        before its first frame; ``DriverError`` if the device fails to give one."""
         ...
 
 

@@ -43,7 +43,7 @@ servient.addClientFactory(new HttpClientFactory());
 const WoT = await servient.start();
 
 const report = {directory: {}, directoryWrites: {}, things: {}, hubActions: {}, history: {}, readOnlyWrite: {},
-                unsubscribe: null};
+                unsubscribe: null, raw: {}};
 
 // --- the directory: its own TD, then every TD it lists -------------------------------
 const dirUrl = `${base}/.well-known/wot`;
@@ -145,6 +145,23 @@ for (const [id, path] of Object.entries(catalogue)) {
   await Promise.all(entry.affordances.properties.map(async (name) => {
     entry.read[name] = await outcome(async () => typeof (await (await thing.readProperty(name)).value()));
   }));
+}
+
+// --- raw images (issue 29): each camera device's rawImage through its image/png and image/jpeg forms
+// (node-wot picks a form by index; its codec for images hands value() a string, the bytes are arrayBuffer())
+for (const [id, thing] of Object.entries(consumed)) {
+  const image = (thing.getThingDescription().properties || {}).rawImage;
+  if (!image) continue;
+  const entry = (report.raw[id] = {});
+  for (const type of ["image/png", "image/jpeg"]) {
+    const formIndex = image.forms.findIndex((f) => f.contentType === type);
+    entry[type] = await outcome(async () => {
+      const out = await thing.readProperty("rawImage", {formIndex});
+      const bytes = Buffer.from(await out.arrayBuffer());
+      const again = await (await thing.readProperty("rawImage", {formIndex})).value();
+      return {formIndex, length: bytes.length, head: bytes.subarray(0, 4).toString("hex"), value: typeof again};
+    });
+  }
 }
 
 // --- subscriptions: every event of every Thing, contactInformation of every device ----

@@ -54,6 +54,18 @@ def test_node_wot_consumes_every_thing_and_receives_every_event(demo_hub, report
         len(e["events"]) + len(e["observe"]) for e in things.values())
 
 
+def test_node_wot_reads_the_raw_image_property_through_its_image_forms(report):
+    """Issue 29: each camera device's rawImage, read through its PNG and JPEG forms without error; the
+    bytes are the image (its JSON form, a base64 PNG string, is read above with every property)."""
+    raw = report["raw"]
+    assert {"barrel-1", "flatpad-1"} <= set(raw)
+    for thing_id, forms in raw.items():
+        png, jpeg = forms["image/png"], forms["image/jpeg"]
+        assert png["ok"] and jpeg["ok"], (thing_id, forms)
+        assert png["value"]["head"] == "89504e47" and png["value"]["length"] > 1000  # \x89PNG
+        assert jpeg["value"]["head"].startswith("ffd8ff") and jpeg["value"]["value"] == "string"
+
+
 def test_node_wot_invokes_the_hub_things_actions(report):
     replay = report["hubActions"]["replay"]
     assert replay["ok"] and replay["value"]["thing"] in report["things"], replay

@@ -43,9 +43,13 @@ def test_td_has_the_vocabulary_and_interop_rules(device):
     for kind in ("properties", "events"):
         for aff in td[kind].values():
             for form in aff["forms"]:
+                if form["href"].startswith("ws://"):  # skinDisplacement's binary form over WebSocket
+                    assert form["contentType"] == "application/vnd.wott.skin-displacement"
+                    continue
                 assert form["op"] and form["htv:methodName"] == "GET"
-                if kind == "events":
-                    assert form["subprotocol"] == "sse"
+                if kind == "events":  # SSE for JSON; the binary form: one endless response
+                    binary = form["contentType"] != "application/json"
+                    assert form["subprotocol"] == ("stream" if binary else "sse")
     assert td["properties"]["contactInformation"]["properties"]["contactForces"]["items"][
         "properties"]["x"]["unit"] == "N"
     assert td["tac:epsilon"] == device.epsilon_mm

@@ -11,6 +11,7 @@ from typing import Any
 
 import httpx
 
+from ._bulk import BulkReader
 from ._directory import AsyncDirectory
 from ._errors import InvalidTD, NotFound
 from ._history import AsyncHistory
@@ -35,6 +36,7 @@ class AsyncClient:
         self.http = http or httpx.AsyncClient(timeout=timeout_s, limits=httpx.Limits(max_connections=None),
                                               follow_redirects=True, headers=auth)
         self.mdns_interfaces = mdns_interfaces
+        self.bulk = BulkReader(auth, timeout_s)  # raw images: large bodies (_bulk.py)
 
     async def __aenter__(self) -> AsyncClient:
         return self
@@ -44,6 +46,7 @@ class AsyncClient:
         await self.async_close()
 
     async def async_close(self) -> None:
+        self.bulk.close()
         if self._own:
             await self.http.aclose()
 
@@ -63,7 +66,7 @@ class AsyncClient:
     async def async_thing(self, target: str) -> AsyncThing:
         """The Tactile Thing whose TD is at this URL, or announced under this mDNS name."""
         td, url = await self.async_td(target)
-        return AsyncThing(td, self.http, url)
+        return AsyncThing(td, self.http, url, self.bulk)
 
     async def async_history(self, target: str) -> AsyncHistory:
         """A wott-hub's recorded history, from its hub Thing's TD (``http://host:8080/wot/hub``)."""

@@ -2,7 +2,9 @@
 
 ``historyDevices`` lists what is recorded, ``historyRecords`` pages a device's range as
 JSON Lines (the client asks again with ``after`` = the last seq until a page is short),
-``historyExport`` returns an MCAP file (docs/history.md of wott-hub). Forms are found
+``historyExport`` returns an MCAP file (docs/history.md of wott-hub). ``async_range`` reads a
+range of one skin event as arrays (``FieldRange``: the packets' nodes one after the other, cut by
+``offsets``), resumable after any record it returned (``after=range.last_seq``). Forms are found
 by action name and ``invokeaction`` in the TD, never by a URL pattern, so the hub decides
 where they live. Times are ns since the epoch (int), a ``datetime``, or the hub's text
 forms (ISO 8601, ``-10m``, ``now``).
@@ -14,14 +16,85 @@ import datetime as dt
 import json
 import os
 from collections.abc import AsyncGenerator, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import httpx
+import numpy as np
+import numpy.typing as npt
 
-from ._errors import InvalidTD, NotFound, TransportError
+from ._errors import ClientError, InvalidTD, NotFound, TransportError
 from ._td import find_form
 
-__all__ = ["AsyncHistory", "Time"]
+__all__ = ["AsyncHistory", "FieldRange", "Time"]
+
+DISPLACEMENT, DEFORMATION = "skinDisplacement", "skinDeformedDetection"
+
+
+@dataclass(frozen=True, slots=True)
+class FieldRange:
+    """A device's recorded ``skinDisplacement`` (or ``skinDeformedDetection``) packets as arrays.
+
+    Packet ``k`` has seq ``seq[k]``, timeStamp ``t_ns[k]`` and the nodes
+    ``ids[offsets[k]:offsets[k + 1]]`` with their ``values`` there: (M, 3) float32 mm vectors for
+    ``skinDisplacement``, (M,) float32 mm intensities for ``skinDeformedDetection``. ``last_seq``
+    resumes a read after this range (``async_range(..., after=r.last_seq)``)."""
+
+    device: str
+    name: str
+    seq: npt.NDArray[np.int64] = field(repr=False)
+    t_ns: npt.NDArray[np.int64] = field(repr=False)
+    offsets: npt.NDArray[np.int64] = field(repr=False)
+    ids: npt.NDArray[np.int64] = field(repr=False)
+    values: npt.NDArray[np.float32] = field(repr=False)
+
+    def __len__(self) -> int:
+        return len(self.seq)
+
+    @property
+    def last_seq(self) -> int | None:
+        return int(self.seq[-1]) if len(self.seq) else None
+
+    def packet(self, k: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float32]]:
+        """(node ids, values) of packet ``k``."""
+        a, b = int(self.offsets[k]), int(self.offsets[k + 1])
+        return self.ids[a:b], self.values[a:b]
+
+    def dense(self, n_nodes: int, rows: npt.NDArray[np.intp] | None = None) -> npt.NDArray[np.float32]:
+        """Every packet as the whole field: (K, n_nodes, 3) or (K, n_nodes), zero where a packet is
+        silent. ``rows``: each of ``ids``' row in the mesh (``Mesh.index_of(r.ids)``), when node ids are
+        not simply rows."""
+        out = np.zeros((len(self), n_nodes, *self.values.shape[1:]), np.float32)
+        packet = np.repeat(np.arange(len(self)), np.diff(self.offsets))
+        out[packet, self.ids if rows is None else rows] = self.values
+        return out
+
+
+def _range_of(device: str, name: str, records: list[dict[str, Any]]) -> FieldRange:
+    """The arrays of ``records`` (``historyRecords`` lines of one skin event)."""
+    vectors = name == DISPLACEMENT
+    key = "arrayOfDisplacedNodes" if vectors else "arrayOfDeformedNodes"
+    node_id = "nodeID" if vectors else "deformedNodeID"
+    seq, ts, counts, ids, values = [], [], [], [], []
+    try:
+        for rec in records:
+            data = rec["data"]
+            nodes = data[key]
+            seq.append(rec["seq"])
+            ts.append(data["timeStamp"])
+            counts.append(len(nodes))
+            ids += [d[node_id] for d in nodes]
+            if vectors:
+                values += [(v["x"], v["y"], v["z"]) for v in (d["displacement"] for d in nodes)]
+            else:
+                values += [d["deformedNodeIntensity"] for d in nodes]
+    except (KeyError, TypeError) as e:
+        raise ClientError(f"{device}: a recorded {name} record is not one ({e!r})") from None
+    offsets = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    shape = (-1, 3) if vectors else (-1,)
+    return FieldRange(device, name, np.array(seq, np.int64), np.array(ts, np.int64), offsets,
+                      np.array(ids, np.int64), np.array(values, np.float32).reshape(shape))
 
 Time = int | str | dt.datetime | None
 
@@ -108,6 +181,30 @@ class AsyncHistory:
                 left -= len(lines)
             if len(lines) < n:
                 return
+
+    async def async_range(self, device: str, name: str = DISPLACEMENT, *, t_from: Time = None,
+                          t_to: Time = None, after: int = 0, limit: int | None = None,
+                          page: int = 10_000) -> FieldRange:
+        """The device's ``name`` packets (``skinDisplacement`` or ``skinDeformedDetection``) of the range
+        as arrays, all of it or the first ``limit``, after seq ``after`` (0: from the start)."""
+        if name not in (DISPLACEMENT, DEFORMATION):
+            raise ClientError(f"async_range reads {DISPLACEMENT} or {DEFORMATION}, not {name!r}")
+        body = {"device": device, **self._range(t_from, t_to, [name])}
+        records: list[dict[str, Any]] = []
+        left = limit
+        while left is None or left > 0:
+            n = page if left is None else min(page, left)
+            resp = await self._post("historyRecords", {**body, "after": after, "limit": n})
+            lines = resp.text.splitlines()
+            got = [json.loads(line) for line in lines]
+            records += got
+            if got:
+                after = got[-1]["seq"]
+            if left is not None:
+                left -= len(got)
+            if len(got) < n:
+                break
+        return _range_of(device, name, records)
 
     async def async_export_mcap(self, path: str | os.PathLike[str], devices: Sequence[str] | str, *,
                                 t_from: Time = None, t_to: Time = None, names: Sequence[str] | None = None,

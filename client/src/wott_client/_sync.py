@@ -16,10 +16,13 @@ from contextlib import aclosing
 from types import TracebackType
 from typing import Any, TypeVar
 
+import numpy as np
+
 from ._client import AsyncClient
 from ._directory import AsyncDirectory
+from ._fields import Displacement
 from ._frames import Item
-from ._history import AsyncHistory, Time
+from ._history import AsyncHistory, FieldRange, Time
 from ._td import Mesh
 from ._thing import AsyncThing
 
@@ -87,6 +90,49 @@ class Thing:
         return self._loop.iterate(self.aio.async_batches(contacts=contacts, actions=actions,
                                                          last_event_id=last_event_id))
 
+    def displacements(self, *, last_event_id: str | None = None) -> Iterator[Displacement]:
+        """``skinDisplacement`` packets as they come (binary form when offered); break to stop."""
+        return self._loop.iterate(self.aio.async_displacement_batches(last_event_id=last_event_id))
+
+    @property
+    def cameras(self) -> list[str]:
+        return self.aio.cameras
+
+    def image(self, camera: str | None = None) -> np.ndarray:
+        """The camera's latest image, H x W x C uint8."""
+        return self._loop.run(self.aio.async_image(camera))
+
+    def pressure(self) -> np.ndarray:
+        """The latest pressure grid, rows x cols float32 kPa."""
+        return self._loop.run(self.aio.async_pressure())
+
+    def frame(self, camera: str | None = None) -> np.ndarray:
+        """The latest raw frame (a camera's image, else a pressure grid): digit-interface's ``get_frame``."""
+        return self._loop.run(self.aio.async_frame(camera))
+
+    def invoke(self, name: str, value: Any = None) -> Any:
+        return self._loop.run(self.aio.async_invoke(name, value))
+
+    def tare(self) -> Any:
+        return self._loop.run(self.aio.async_tare())
+
+    def restart(self) -> Any:
+        return self._loop.run(self.aio.async_restart())
+
+    def recalibrate(self) -> Any:
+        return self._loop.run(self.aio.async_recalibrate())
+
+    def observe(self, name: str, *, last_event_id: str | None = None) -> Iterator[Any]:
+        """Values of observable property ``name`` as they change; break to stop."""
+        agen = self.aio.async_observe(name, last_event_id=last_event_id)
+
+        async def batches() -> AsyncGenerator[list[Any], None]:
+            async with aclosing(agen):
+                async for value in agen:
+                    yield [value]
+
+        return self._loop.iterate(batches())
+
 
 class Directory:
     """Blocking twin of ``AsyncDirectory``."""
@@ -143,6 +189,12 @@ class History:
                 yield buf
 
         return self._loop.iterate(batches())
+
+    def range(self, device: str, name: str = "skinDisplacement", *, t_from: Time = None, t_to: Time = None,
+              after: int = 0, limit: int | None = None) -> FieldRange:
+        """The device's skin packets of the range as arrays (``AsyncHistory.async_range``)."""
+        return self._loop.run(self.aio.async_range(device, name, t_from=t_from, t_to=t_to, after=after,
+                                                   limit=limit))
 
     def export_mcap(self, path: str | os.PathLike[str], devices: Sequence[str] | str, *, t_from: Time = None,
                     t_to: Time = None, names: Sequence[str] | None = None, scene: bool = True,

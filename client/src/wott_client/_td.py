@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
-from urllib.parse import urljoin
+from urllib.parse import quote, urljoin
 
 import numpy as np
 
@@ -22,9 +22,27 @@ __all__ = ["Form", "Mesh", "find_form", "is_tactile", "parse_mesh"]
 
 @dataclass(frozen=True)
 class Form:
-    href: str  # absolute
+    href: str  # absolute (a URI template's variables, if any, still in it: ``expand``)
     ops: tuple[str, ...]
     subprotocol: str | None
+    content_type: str = "application/json"
+
+    def expand(self, **variables: Any) -> str:
+        """The href with its URI template expanded (RFC 6570 ``{?a,b}`` and ``{&a}``; None: left out)."""
+        href = self.href
+        while "{" in href:
+            start = href.index("{")
+            end = href.index("}", start)
+            expr = href[start + 1:end]
+            op, names = (expr[0], expr[1:]) if expr[:1] in "?&" else ("", expr)
+            pairs = [(k, variables[k]) for k in names.split(",") if variables.get(k) is not None]
+            if op:
+                text = "&".join(f"{k}={quote(str(v), safe='')}" for k, v in pairs)
+                text = (op + text) if text else ""
+            else:
+                text = ",".join(quote(str(v), safe="") for _, v in pairs)
+            href = href[:start] + text + href[end + 1:]
+        return href
 
 
 def _forms(td: dict[str, Any], holder: dict[str, Any], url: str | None) -> list[Form]:
@@ -35,22 +53,34 @@ def _forms(td: dict[str, Any], holder: dict[str, Any], url: str | None) -> list[
             continue
         op = f.get("op") or []
         ops = (op,) if isinstance(op, str) else tuple(op)
-        out.append(Form(urljoin(base, f["href"]), ops, f.get("subprotocol")))
+        out.append(Form(urljoin(base, f["href"]), ops, f.get("subprotocol"),
+                        str(f.get("contentType") or "application/json")))
     return out
 
 
 def find_form(td: dict[str, Any], op: str, kind: str | None = None, name: str | None = None,
-              url: str | None = None, stream: bool = False) -> Form | None:
+              url: str | None = None, stream: bool = False, content_type: str | None = None,
+              subprotocol: str | None = None) -> Form | None:
     """The first HTTP form for ``op`` (of affordance ``kind``/``name``, or of the Thing when ``kind`` is
-    None); ``stream``: an SSE one (``subprotocol: sse``)."""
+    None); ``stream``: an SSE one (``subprotocol: sse``); ``content_type``: of that media type (without
+    it, any but the binary ones, ``_NOT_JSON``); ``subprotocol``: with that subprotocol."""
     holder = td if kind is None else (td.get(kind) or {}).get(name) or {}
     for form in _forms(td, holder, url):
         if op not in form.ops or not form.href.startswith(("http://", "https://")):
             continue
         if stream and form.subprotocol not in ("sse", None):
             continue
+        if subprotocol is not None and form.subprotocol != subprotocol:
+            continue
+        media = form.content_type.split(";")[0].strip()
+        if media != content_type if content_type is not None else media.startswith(_NOT_JSON):
+            continue
         return form
     return None
+
+
+_NOT_JSON = ("image/", "multipart/", "application/x-npy", "application/vnd.wott.")
+"""Media types of the binary forms a Tactile TD may offer besides its JSON ones (skipped unless asked)."""
 
 
 def is_tactile(td: dict[str, Any]) -> bool:

@@ -194,3 +194,30 @@ def test_the_demo_device_opens_and_streams(registry):
     assert driver.description.mesh.n_nodes == 256 and driver.simulator is not None
     pairs = asyncio.run(play(driver, 5))
     assert len(pairs) == 5
+
+
+def test_the_pressure_grid_is_the_last_frames_as_rows_by_cols(registry, tmp_path):
+    """ServesRawSignals (issue 29): the grid read on demand is the frame's pressure, rows x cols, a view."""
+    from wott_hub.plugin_api import RawSignal, ServesRawSignals
+
+    scene_file = tmp_path / "e2e.toml"
+    scene_file.write_text(SCENE)
+    cfg = DeviceConfig("t1", "taxel-array", {"simulate": True, "scene": str(scene_file), "rate_hz": RATE,
+                                              "rows": 8, "cols": 10})
+    driver = registry.open_device(cfg)
+    assert isinstance(driver, ServesRawSignals)
+    assert driver.raw_signals == (RawSignal("pressure", "grid", (8, 10), unit="kPa", rate_hz=RATE),)
+    assert driver.raw_sample("pressure") is None  # before the first frame
+
+    async def pressed():
+        async for f in driver.frames():
+            sample = driver.raw_sample("pressure")
+            assert sample is not None and sample.t_ns == f.t_ns
+            assert sample.array.shape == (8, 10) and np.shares_memory(sample.array, f.pressure)
+            np.testing.assert_array_equal(sample.array.ravel(), f.pressure)  # row-major: node r * cols + c
+            if f.pressure.max() > 0:
+                break
+        await driver.close()
+
+    asyncio.run(asyncio.wait_for(pressed(), 30))
+    assert driver.raw_sample("temperature") is None

@@ -115,3 +115,27 @@ def test_close_releases_a_source_whose_frames_are_not_being_read():
 
     assert len(asyncio.run(asyncio.wait_for(run(), 10))) == 2
     assert driver.reconnects == 0 and driver.health().state is Health.ok
+
+
+def test_raw_samples_are_the_last_frame_read_as_it_is_grey_or_rgb():
+    """ServesRawSignals (issue 29): a reference to the last images read, a camera's BGR reversed as a
+    view, None before the first frame or for a name the device has not."""
+    from wott_hub.plugin_api import RawSignal, ServesRawSignals
+
+    grey = np.arange(12, dtype=np.uint8).reshape(3, 4)
+    bgr = np.zeros((3, 4, 3), np.uint8)
+    bgr[..., 0] = 200  # blue in OpenCV's order
+
+    class PairEstimator(Estimator):
+        def set_reference(self, images) -> None:
+            self.has_reference = True
+
+    driver = NumberDriver(example_device("flat"), PairEstimator(), lambda: None, source_name="pair")
+    assert isinstance(driver, ServesRawSignals) and driver.raw_sample("bottom") is None
+    driver.raw_signals = (RawSignal("bottom", "image", (3, 4)), RawSignal("top", "image", (3, 4)))
+    driver._raw = (123, (grey, bgr))  # what the worker thread assigns as it reads a pair
+    bottom, top = driver.raw_sample("bottom"), driver.raw_sample("top")
+    assert bottom.t_ns == 123 and bottom.array is grey  # as read: no copy
+    assert top.array.shape == (3, 4, 3) and top.array[0, 0].tolist() == [0, 0, 200]  # RGB
+    assert np.shares_memory(top.array, bgr)  # a view
+    assert driver.raw_sample("left") is None

@@ -26,9 +26,10 @@ from typing import Any, Protocol, runtime_checkable
 
 from wott_hub.errors import DriverError
 from wott_hub.tactile import DeviceDescription, TactileFrame
+from wott_hub.tactile.raw import RawSample, RawSignal
 
-__all__ = ["Driver", "DriverError", "Health", "HealthStatus", "NoisyAtRest", "Recalibratable",
-           "ReportsUnavailableNodes", "Retargetable", "Tareable"]
+__all__ = ["Driver", "DriverError", "Health", "HealthStatus", "NoisyAtRest", "RawSample", "RawSignal",
+           "Recalibratable", "ReportsUnavailableNodes", "Retargetable", "ServesRawSignals", "Tareable"]
 
 
 class Health(StrEnum):
@@ -150,3 +151,22 @@ class ReportsUnavailableNodes(Protocol):
     """
 
     unavailable_nodes: list[int]
+
+
+@runtime_checkable
+class ServesRawSignals(Protocol):
+    """A driver whose raw signals readers may ask for: each camera's latest image, a taxel array's
+    pressure grid (served as properties of the device's Thing, docs/tactile-td.md).
+
+    ``raw_signals`` describes them once the driver is open (read when the hub serves the
+    device). ``raw_sample(name)`` returns the latest value of signal ``name`` as the driver
+    holds it (a reference, no copy, no encoding: the driver only keeps the last array it
+    read), or None before the first frame. It runs on the event loop, so it must not block;
+    the hub calls it only when a reader asks, at the reader's rate, and encodes there. An
+    image is H x W (grey) or H x W x 3 in RGB order, uint8; a grid is rows x cols.
+    """
+
+    raw_signals: tuple[RawSignal, ...]
+
+    def raw_sample(self, name: str) -> RawSample | None:
+        """The latest value of signal ``name`` (one of ``raw_signals``), or None if none yet."""

@@ -38,16 +38,21 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from wott_hub.errors import HistoryError, RecordRefused
+from wott_hub.events.fields import FieldRecord, Wire
 from wott_hub.events.record import Record, SkinArrays
 
 __all__ = ["BatchProcess", "Fields", "fields_of", "main", "records_of"]
 
 log = logging.getLogger(__name__)
 
-Fields = tuple[str, int, int, str, int, str, "tuple[bytes, bytes] | None"]
+Fields = tuple[str, int, int, str, int, "str | None", "tuple[bytes, bytes] | Wire | None"]
 """A ``Record`` as it crosses: its fields in ``Record``'s order, the skin arrays as bytes
 (``SkinArrays.to_wire``). Pickled so, a batch costs the writer's side ~1.1 µs a record; as
-``Record``s (their ``__reduce__``) ~1.7 µs, and that side is the hub's process (measured)."""
+``Record``s (their ``__reduce__``) ~1.7 µs, and that side is the hub's process (measured).
+A ``skinDisplacement`` record (``events.fields.FieldRecord``) crosses as its numbers
+(``FieldRecord.wire``, mm as the pipeline made them: quantised in this process, not the hub's)
+with ``data`` None unless its text was already written: history packs the numbers and never
+needs the text."""
 
 
 class BatchProcess:
@@ -134,13 +139,23 @@ class BatchProcess:
 
 def fields_of(records: Sequence[Record]) -> list[Fields]:
     return [(r.thing, r.seq, r.kind, r.name, r.t_ns, r.data, None if r.skin is None else r.skin.to_wire())
+            if type(r) is not FieldRecord else
+            (r.thing, r.seq, r.kind, r.name, r.t_ns, r.data if r.text_built else None, r.wire())
             for r in records]
 
 
 def records_of(fields: list[Fields]) -> list[Record]:
-    return [Record(thing, seq, kind, name, t_ns, data, None,
-                   None if skin is None else SkinArrays.from_wire(skin))
-            for thing, seq, kind, name, t_ns, data, skin in fields]
+    return [_record(*f) for f in fields]
+
+
+def _record(thing: str, seq: int, kind: int, name: str, t_ns: int, data: str | None,
+            skin: tuple[bytes, bytes] | Wire | None) -> Record:
+    if skin is not None and len(skin) == 3:  # a FieldRecord's numbers
+        return FieldRecord.revive(thing, seq, t_ns, skin, None, data)
+    if data is None:
+        raise ValueError(f"record {seq} of {thing!r} crossed without its payload")
+    arrays = None if skin is None else SkinArrays.from_wire(skin)
+    return Record(thing, seq, kind, name, t_ns, data, None, arrays)
 
 
 # --- the process ------------------------------------------------------------------------

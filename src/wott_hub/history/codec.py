@@ -27,6 +27,9 @@ the contract never rests on where the numbers came from. ``encode`` and ``decode
 payload) pay NumPy's fixed cost per call (~0.3-1 ms): whatever handles rows in numbers uses
 the batch functions.
 
+A ``skinDisplacement`` packet (the vectors of the same nodes) is packed as well, in a form of
+its own that starts with ``field_codec.PACKED_FIELD`` (0x02): ``field_codec.py``.
+
 Contract: ``decode(encode(kind, name, t_ns, data), t_ns) == data`` for every payload, and
 ``decode_many(encode_records(recs), ...) == [r.data for r in recs]`` whatever ``r.skin``
 holds; ``decode`` also accepts a ``str`` (rows written before revision 0006 on a database
@@ -45,10 +48,14 @@ import numpy.typing as npt
 
 from wott_hub.events.record import KIND_EVENT, Record, SkinArrays
 
-__all__ = ["PACKED", "SKIN_EVENT", "decode", "decode_joined", "decode_many", "encode", "encode_records"]
+from .field_codec import PACKED_FIELD, encode_fields, field_texts, field_texts_at
+
+__all__ = ["PACKED", "PACKED_FIELD", "SKIN_EVENT", "decode", "decode_joined", "decode_many", "encode",
+           "encode_records"]
 
 PACKED = 0x01
 _MARK = bytes((PACKED,))
+_FIELD_MARK = bytes((PACKED_FIELD,))
 SKIN_EVENT = "skinDeformedDetection"
 _SAME_TIME = 1
 _SMALL_GAPS = 2
@@ -425,7 +432,7 @@ def _keep(idx: list[int], ts: _Int, n: _Int, ids: _Int, micro: _Int,
 
 def encode_records(recs: Sequence[Record]) -> list[bytes]:
     """The bytes stored for each record's payload (a batch: the writer's)."""
-    out: list[bytes | None] = [None] * len(recs)
+    out: list[bytes | None] = encode_fields(recs)  # skinDisplacement packets (field_codec.py)
     todo = [i for i, r in enumerate(recs) if r.kind == KIND_EVENT and r.name == SKIN_EVENT]
     for numbers in (_from_arrays, _from_text):  # what the arrays cannot give, the text may
         batch = [recs[i] for i in todo]
@@ -505,6 +512,9 @@ def _decode_at(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, 
     where = np.flatnonzero(packed)
     if len(where) == len(off):
         return _texts(_unpack_at(buf, off, size, t_ns))
+    fields = (buf[off] == PACKED_FIELD) & (size > 0)
+    if fields.any():
+        return _with_fields(joined, base, buf, off, size, t_ns, stored, fields)
     rest = np.flatnonzero(~packed).tolist()
     if stored is not None:
         items: Sequence[bytes | memoryview] = [stored[i] for i in rest]
@@ -516,6 +526,24 @@ def _decode_at(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, 
     out = np.empty(len(off), object)
     out[where] = _texts(_unpack_at(buf, off[where], size[where], t_ns[where]))
     out[rest] = _utf8(items)
+    result: list[str] = out.tolist()
+    return result
+
+
+def _with_fields(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
+                 stored: Sequence[bytes | memoryview] | None, fields: npt.NDArray[np.bool_]) -> list[str]:
+    """``_decode_at`` of payloads some of which are packed displacement packets (``field_codec``): those
+    written back by ``field_texts``, the others as ``_decode_at`` writes them."""
+    where = np.flatnonzero(fields)
+    others = np.flatnonzero(~fields)
+    texts = field_texts_at(buf, off[where], size[where], t_ns[where])
+    if not len(others):
+        return texts
+    out = np.empty(len(off), object)
+    out[where] = texts
+    if len(others):
+        rest = None if stored is None else [stored[i] for i in others.tolist()]
+        out[others] = _decode_at(joined, base, buf, off[others], size[others], t_ns[others], rest)
     result: list[str] = out.tolist()
     return result
 
@@ -532,7 +560,13 @@ def _utf8(items: Sequence[bytes | memoryview]) -> list[str]:
 def _decode_each(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
     """``decode_many`` of rows some of which are ``str``: each row tested in Python."""
     where = [i for i, d in enumerate(stored) if d[:1] == _MARK]  # a str never starts with it
-    out = [d if isinstance(d, str) else "" if d[:1] == _MARK else str(d, "utf-8") for d in stored]
+    out = [d if isinstance(d, str) else "" if d[:1] in (_MARK, _FIELD_MARK) else str(d, "utf-8")
+           for d in stored]
+    fields = [i for i, d in enumerate(stored) if d[:1] == _FIELD_MARK]
+    if fields:
+        for i, text in zip(fields, field_texts([stored[i] for i in fields],  # type: ignore[misc]  # no str
+                                               [t_ns[i] for i in fields]), strict=True):
+            out[i] = text
     if not where:
         return out
     times = [t_ns[i] for i in where]

@@ -20,6 +20,7 @@ from wott_hub.plugins.model import check_device_id
 from wott_hub.runtime.capabilities import action_names
 from wott_hub.runtime.opening import CLOSE_TIMEOUT_S, open_driver
 from wott_hub.runtime.pipeline import CONTACTS, UNAVAILABLE, DevicePipeline
+from wott_hub.runtime.raw import RawRecorder, RawSource
 from wott_hub.servient import ServedThing, clean_td
 from wott_hub.td.builder import build_tactile_td, static_property_values
 
@@ -33,6 +34,7 @@ if TYPE_CHECKING:
     from wott_hub.runtime.pipeline import Report
     from wott_hub.runtime.pool import WorkerDevice, WorkerPool
     from wott_hub.tactile import DeviceDescription, FrameProcessor
+    from wott_hub.tactile.raw import RawSample
 
     from .recording import HubHistory
     from .things import Things
@@ -62,6 +64,8 @@ class DeviceRuntime:
     task: asyncio.Task[None] | None = None
     config: DeviceConfig | None = None  # what it was opened from (None: Hub.add_driver); restart reopens it
     actions: dict[str, Any] = field(default_factory=dict)  # device actions' counters (device_actions.py)
+    raw: RawSource | None = None  # its raw signals, read on demand (runtime/raw.py)
+    recorder: asyncio.Task[None] | None = None  # its images recorded at the rate it opted in to
 
     @property
     def driver(self) -> DeviceHandle:
@@ -156,8 +160,10 @@ class Devices:
         reopenable = config is not None  # restart opens it again from its config (here or in its worker)
         actions = action_names(pipeline.driver, reopenable=reopenable,
                                capabilities=worker.capabilities if worker is not None else None)
+        raw = _raw_source(tid, pipeline, worker)
         td = build_tactile_td(desc, base=f"{layout.http_base}/", forms=layout.factory(tid),
-                              context_url=layout.context_url, actions=actions)
+                              context_url=layout.context_url, actions=actions,
+                              raw=raw.signals if raw is not None else ())
         td["id"] = self.things.identity.device_id(tid)
         td["forms"] = layout.thing_forms(tid)
         if layout.mqtt is not None:
@@ -167,7 +173,8 @@ class Devices:
         static.pop(CONTACTS, None)
         static.pop(UNAVAILABLE, None)
         served = ServedThing.create(tid, td, static, record=record and self.config.history)
-        dev = DeviceRuntime(tid, family or desc.family, served, pipeline, worker, config=config)
+        dev = DeviceRuntime(tid, family or desc.family, served, pipeline, worker, config=config, raw=raw)
+        served.raw = raw
         served.dynamic[CONTACTS] = pipeline.read_contacts
         served.dynamic[UNAVAILABLE] = pipeline.read_unavailable
         self.things.serve(served)
@@ -181,6 +188,10 @@ class Devices:
         await self.history.attach(dev.thing, dev.family)
 
     def _run(self, dev: DeviceRuntime) -> None:
+        if dev.raw is not None and dev.recorder is None:  # a camera that opted in to recording its images
+            recorder = RawRecorder(dev.id, dev.raw, self.plane)
+            if recorder.signals:
+                dev.recorder = asyncio.create_task(recorder.run(), name=f"raw-recorder:{dev.id}")
         if dev.worker is not None:  # its worker process runs it
             dev.pipeline.started()
             dev.worker.run(self.plane.trace)
@@ -192,6 +203,10 @@ class Devices:
         """Stop a device's pipeline and close its driver, in ``CLOSE_TIMEOUT_S`` (and a margin) at most:
         a ``close()`` that hangs, or a ``frames()`` that will not end once cancelled (a camera that never
         opens), is logged and left behind; the device is removed / the hub stops anyway."""
+        recorder, dev.recorder = dev.recorder, None
+        if recorder is not None:
+            recorder.cancel()
+            await asyncio.gather(recorder, return_exceptions=True)
         task, dev.task = dev.task, None
         if task is not None:
             task.cancel()
@@ -253,3 +268,17 @@ class Devices:
         for dev in self.running.values():
             if dev.worker is not None and dev.worker.worker == worker:
                 dev.pipeline.failed("its worker process exited")
+
+
+def _raw_source(thing: str, pipeline: DevicePipeline, worker: WorkerDevice | None) -> RawSource | None:
+    """The device's raw signals, sampled from its driver here or from its worker (None: it has none)."""
+    if worker is not None:
+        return RawSource(thing, worker.raw_signals, worker.raw_sample) if worker.raw_signals else None
+    signals = pipeline.raw_signals()
+    if not signals:
+        return None
+
+    async def sample(name: str) -> RawSample | None:
+        return pipeline.raw_sample(name)
+
+    return RawSource(thing, signals, sample)

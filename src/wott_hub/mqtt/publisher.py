@@ -53,6 +53,7 @@ from typing import TYPE_CHECKING, Any
 import aiomqtt
 import paho.mqtt.client as mqtt
 
+from wott_hub.events.fields import FieldRecord
 from wott_hub.events.record import KIND_EVENT, Record
 from wott_hub.servient import HUB_THING_ID
 
@@ -150,7 +151,7 @@ async def _dropped_after(client: aiomqtt.Client) -> None:
 class _Tap:
     """The event plane's tap of one Thing: topic lookups cached, one append per record."""
 
-    __slots__ = ("_events", "_layout", "_props", "_publisher", "_thing")
+    __slots__ = ("_binary", "_events", "_layout", "_props", "_publisher", "_thing")
 
     def __init__(self, publisher: MqttPublisher, thing: str) -> None:
         self._publisher = publisher
@@ -158,6 +159,7 @@ class _Tap:
         self._layout = publisher.layout
         self._events: dict[str, tuple[str, int]] = {}
         self._props: dict[str, tuple[str, int]] = {}
+        self._binary: dict[str, str] = {}  # event name -> the topic of its binary form
 
     @property
     def active(self) -> bool:
@@ -171,6 +173,11 @@ class _Tap:
                 route = self._events[rec.name] = (layout.event_topic(self._thing, rec.name),
                                                   layout.qos("event", rec.name))
             self._publisher.put((route[0], rec.data, route[1], False))
+            if type(rec) is FieldRecord:  # skinDisplacement: its binary form on a topic of its own
+                topic = self._binary.get(rec.name)
+                if topic is None:
+                    topic = self._binary[rec.name] = layout.binary_topic(self._thing, rec.name)
+                self._publisher.put((topic, rec.binary(), route[1], False))
         else:
             route = self._props.get(rec.name)
             if route is None:

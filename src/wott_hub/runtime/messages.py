@@ -14,6 +14,11 @@ Device actions: ``Act`` asks for one (``"tare"``, ``"recalibrate"``,
 ``Acted`` with the same ``request``: ``detail`` (the driver's sentence) and
 ``error`` None, or ``error`` = (name of a ``wott_hub.errors`` class, message);
 ``report`` is the pipeline's right after, so the hub shows the effect at once.
+
+Raw signals: ``Sample`` asks for the latest sample of a device's raw signal (a reader of its
+image or grid, in the hub); the worker answers ``Sampled`` with the same ``request``: the
+array as its dtype, shape and bytes (None before the first frame), or ``error`` as for ``Acted``.
+The hub encodes it (``raw.RawSource``): the pipe carries only what a reader asked for.
 """
 
 from __future__ import annotations
@@ -26,9 +31,10 @@ if TYPE_CHECKING:
     from wott_hub.events.record import Record
     from wott_hub.plugins.model import DeviceConfig
     from wott_hub.tactile import DeviceDescription
+    from wott_hub.tactile.raw import RawSignal
 
 __all__ = ["Act", "Acted", "Batch", "Close", "CloseDevice", "Ended", "HealthReports", "Open", "OpenFailed",
-           "Opened", "Run", "ToHub", "ToWorker"]
+           "Opened", "Run", "Sample", "Sampled", "ToHub", "ToWorker"]
 
 
 # --- hub -> worker ---------------------------------------------------------------------------
@@ -60,11 +66,19 @@ class Act(NamedTuple):
     action: str
 
 
+class Sample(NamedTuple):
+    """The latest sample of raw signal ``signal``; answered by ``Sampled`` with the same ``request``."""
+
+    device: str
+    request: int
+    signal: str
+
+
 class Close(NamedTuple):
     """Close every device and end the worker."""
 
 
-ToWorker = Open | Run | CloseDevice | Act | Close
+ToWorker = Open | Run | CloseDevice | Act | Sample | Close
 
 
 # --- worker -> hub ---------------------------------------------------------------------------
@@ -77,6 +91,7 @@ class Opened(NamedTuple):
     description: DeviceDescription
     family: str
     capabilities: tuple[str, ...]
+    raw_signals: tuple[RawSignal, ...] = ()  # its driver's (``ServesRawSignals``)
 
 
 class OpenFailed(NamedTuple):
@@ -114,4 +129,15 @@ class Acted(NamedTuple):
     report: Report | None
 
 
-ToHub = Opened | OpenFailed | Batch | HealthReports | Ended | Acted
+class Sampled(NamedTuple):
+    """The answer to ``Sample`` number ``request``: the array (``data`` None: no frame yet) or an error."""
+
+    request: int
+    t_ns: int
+    dtype: str
+    shape: tuple[int, ...]
+    data: bytes | None
+    error: tuple[str, str] | None
+
+
+ToHub = Opened | OpenFailed | Batch | HealthReports | Ended | Acted | Sampled

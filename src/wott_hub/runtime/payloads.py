@@ -1,4 +1,5 @@
-"""The JSON texts of a frame's records, written straight from the processor's arrays.
+"""The JSON texts of a frame's records, written straight from the processor's arrays (and the
+numbers of its ``skinDisplacement`` packet, whose forms ``events.fields`` writes on demand).
 
 Contract: each function returns exactly ``events.record.encode`` of the payload the
 ``FrameResult`` describes (``skin_deformed_detection()``, ``contact_information()``), byte for
@@ -11,9 +12,11 @@ per contact first and encoding it costs 2-4x more (contacts: 11.6 against 6 µs;
 
 from __future__ import annotations
 
+import numpy as np
+
 from wott_hub.tactile import FrameResult
 
-__all__ = ["contacts_json", "skin_deformed_json"]
+__all__ = ["contacts_json", "displacement_rows", "skin_deformed_json"]
 
 
 _NODE_HEADS: list[str] = []
@@ -57,3 +60,16 @@ def contacts_json(res: FrameResult) -> str:
         raise ValueError("Out of range float values are not JSON compliant")  # as encode() says
     ids = f',"contactIds":[{",".join([str(c.id) for c in contacts])}]' if contacts else ""
     return f'{{"numOfContacts":{len(contacts)},"contactLocations":[{where}],"contactForces":[{force}]{ids}}}'
+
+
+def displacement_rows(res: FrameResult, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ``skinDisplacement`` packet of a frame as the pipeline hands it over: the skin packet's nodes
+    (``res.deformed_nodes``) and their rows of ``displacement`` (mm, a copy), all zero in the release
+    packet (the skin at rest); ``events.fields.FieldArrays.of`` quantises them to µm when first
+    needed. The norm of each quantised vector is the node's ``deformedNodeIntensity`` within the
+    quantisation: both are rounded to 1 µm, the intensity from the exact norm, the vector per
+    component (docs/tactile-td.md)."""
+    ids = res.deformed_nodes
+    if res.is_release:
+        return ids, np.zeros((len(ids), 3))
+    return ids, displacement[ids]

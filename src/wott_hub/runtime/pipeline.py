@@ -34,31 +34,37 @@ import logging
 import time
 from typing import TYPE_CHECKING, NamedTuple
 
+import numpy as np
+
 from wott_hub.drivers.base import (
     Driver,
     Health,
     HealthStatus,
     NoisyAtRest,
+    RawSample,
+    RawSignal,
     Recalibratable,
     ReportsUnavailableNodes,
+    ServesRawSignals,
     Tareable,
 )
 from wott_hub.errors import Conflict, DriverError, NotFound
+from wott_hub.events.fields import SKIN_DISPLACEMENT, FieldRecord
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, SkinArrays, encode
 from wott_hub.plugins.isolation import CAUGHT, Guard
 from wott_hub.tactile import FrameError, FrameProcessor, FrameResult
 from wott_hub.types import FrameSink
 
 from .opening import CLOSE_TIMEOUT_S, restart_backoff
-from .payloads import contacts_json, skin_deformed_json
+from .payloads import contacts_json, displacement_rows, skin_deformed_json
 
 if TYPE_CHECKING:
     from wott_hub.types import RecordSink
 
     from .handle import DeviceHandle
 
-__all__ = ["ACTION", "CONTACTS", "NO_CONTACTS", "NO_UNAVAILABLE", "RESTARTED", "SKIN_DEFORMED", "UNAVAILABLE",
-           "DevicePipeline", "Report", "tune_processor"]
+__all__ = ["ACTION", "CONTACTS", "NO_CONTACTS", "NO_UNAVAILABLE", "RESTARTED", "SKIN_DEFORMED",
+           "SKIN_DISPLACEMENT", "UNAVAILABLE", "DevicePipeline", "Report", "tune_processor"]
 
 log = logging.getLogger("wott_hub.hub")
 
@@ -218,6 +224,28 @@ class DevicePipeline:
             raise DriverError(f"device {self.thing!r}: {out.fault.reason}")
         return str(out.value or name)
 
+    # --- raw signals (``ServesRawSignals``), read on demand ------------------------------------------
+
+    def raw_signals(self) -> tuple[RawSignal, ...]:
+        """The driver's raw signals (none if it has no such capability, or if reading them fails: logged)."""
+        driver = self.driver
+        if not isinstance(driver, ServesRawSignals):
+            return ()
+        out = self.guard.call("raw_signals", _signals_of, driver)
+        return out.value if out.fault is None and out.value is not None else ()
+
+    def raw_sample(self, name: str) -> RawSample | None:
+        """The driver's latest sample of signal ``name`` (None: none yet). Through the guard: a driver
+        that raises, or answers something else than a ``RawSample``, fails this read only
+        (``DriverError``)."""
+        driver = self.driver
+        if not isinstance(driver, ServesRawSignals):
+            raise NotFound(f"device {self.thing!r} has no raw signals")
+        out = self.guard.call(f"raw_sample({name!r})", _sample_of, driver, name)
+        if out.fault is not None:
+            raise DriverError(f"device {self.thing!r}: {out.fault.reason}")
+        return out.value  # no fault: checked by _sample_of
+
     async def close(self) -> None:
         """Close the driver; a ``close()`` that raises or hangs is logged, never raised."""
         await self.guard.call_async("close()", self.driver.close, timeout_s=CLOSE_TIMEOUT_S)
@@ -276,11 +304,14 @@ class DevicePipeline:
 
     # --- frames to records -------------------------------------------------------------------
 
-    def records(self, res: FrameResult, t_in: int, sink: RecordSink) -> None:
+    def records(self, res: FrameResult, t_in: int, sink: RecordSink,
+                displacement: np.ndarray | None = None) -> None:
         """Put the records of one frame that ``sink`` wants; unwanted ones are not even encoded.
 
-        A skin packet when one is due, one record per action, and the contacts
-        property while touched and once more at rest. ``t_in``: trace stamps ride
+        A skin packet when one is due (and its ``skinDisplacement`` sibling, the same nodes'
+        vectors of the frame's ``displacement``, as numbers: its text and binary form are
+        written by whoever reads them, ``events.fields``), one record per action, and the
+        contacts property while touched and once more at rest. ``t_in``: trace stamps ride
         on the skin packet (0: not tracing).
         """
         thing = self.thing
@@ -295,6 +326,8 @@ class DevicePipeline:
                 trace["enc"] = time.perf_counter_ns()
             put(Record(thing, 0, KIND_EVENT, SKIN_DEFORMED, t_ns, data, trace,
                        SkinArrays(res.deformed_nodes, res.intensity)))
+        if res.packet_due and displacement is not None and wants(thing, KIND_EVENT, SKIN_DISPLACEMENT):
+            put(FieldRecord(thing, 0, t_ns, rows=displacement_rows(res, displacement)))
         if res.actions and wants(thing, KIND_EVENT, ACTION):
             for action in res.actions:
                 put(Record(thing, 0, KIND_EVENT, ACTION, t_ns, encode(action)))
@@ -343,7 +376,7 @@ class DevicePipeline:
                         self.reason = str(e)
                         continue
                     self.frames += 1
-                    records(res, t_in, sink)
+                    records(res, t_in, sink, frame.displacement)
                     unavailable_changed(res.t_ns, sink)
                     if frame_done is not None:
                         frame_done()
@@ -373,6 +406,24 @@ class DevicePipeline:
                 self.unavailable_json = rec.data
             if wants(thing, kind, name):
                 put(rec)
+
+
+def _signals_of(driver: ServesRawSignals) -> tuple[RawSignal, ...]:
+    signals = tuple(driver.raw_signals)
+    if not all(isinstance(s, RawSignal) for s in signals):
+        raise TypeError("raw_signals holds something else than RawSignal descriptions")
+    if len({s.name for s in signals}) != len(signals):
+        raise ValueError("raw_signals names a signal twice")
+    return signals
+
+
+def _sample_of(driver: ServesRawSignals, name: str) -> RawSample | None:
+    sample = driver.raw_sample(name)
+    if sample is None:
+        return None
+    if not (isinstance(sample, tuple) and len(sample) == 2 and isinstance(sample[1], np.ndarray)):
+        raise TypeError(f"returned a {type(sample).__name__}, not a RawSample (t_ns, ndarray) or None")
+    return RawSample(int(sample[0]), sample[1])
 
 
 def _processor_for(driver: Driver) -> FrameProcessor:

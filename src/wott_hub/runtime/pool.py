@@ -10,7 +10,8 @@ capabilities its worker reported, the health its worker last reported.
 
 Device actions: ``WorkerDevice.act`` sends ``Act`` and waits for its ``Acted``,
 at most ``ACTION_TIMEOUT_S`` (``RESTART_TIMEOUT_S`` for a restart) and never
-for a worker that has exited (``WorkerDied``).
+for a worker that has exited (``WorkerDied``). Raw signals: ``WorkerDevice.raw_sample`` sends
+``Sample`` and waits for its ``Sampled`` the same way (``ACTION_TIMEOUT_S``).
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ from .messages import (
     Opened,
     OpenFailed,
     Run,
+    Sample,
+    Sampled,
 )
 from .worker import worker_main
 
@@ -47,6 +50,7 @@ if TYPE_CHECKING:
     from wott_hub.events.record import Record
     from wott_hub.plugins.model import DeviceConfig
     from wott_hub.tactile import DeviceDescription
+    from wott_hub.tactile.raw import RawSample, RawSignal
 
     from .messages import ToWorker
     from .pipeline import Report
@@ -90,12 +94,13 @@ class WorkerDevice:
     the health the worker last reported. Its frames never reach the hub: records do."""
 
     def __init__(self, device_id: str, description: DeviceDescription, pool: WorkerPool, worker: int,
-                 capabilities: tuple[str, ...] = ()) -> None:
+                 capabilities: tuple[str, ...] = (), raw_signals: tuple[RawSignal, ...] = ()) -> None:
         self.id = device_id
         self.description = description
         self.pool = pool
         self.worker = worker
         self.capabilities = capabilities  # the device actions its driver can do, as its worker reported
+        self.raw_signals = raw_signals  # its driver's raw signals, as its worker reported
         self._health = HealthStatus.now(Health.ok)
 
     def health(self) -> HealthStatus:
@@ -113,6 +118,10 @@ class WorkerDevice:
         timeout = RESTART_TIMEOUT_S if action == "restart" else ACTION_TIMEOUT_S
         return await self.pool.request(self.worker, self.id, action, timeout)
 
+    async def raw_sample(self, name: str) -> RawSample | None:
+        """The driver's latest sample of raw signal ``name``, from its worker (``WorkerPool.sample``)."""
+        return await self.pool.sample(self.worker, self.id, name, ACTION_TIMEOUT_S)
+
     async def close(self) -> None:
         self.pool.send(self.worker, CloseDevice(self.id))
 
@@ -127,6 +136,7 @@ class WorkerPool:
         self.conns: list[mp.connection.Connection] = []
         self._pending: dict[str, asyncio.Future[Opened]] = {}
         self._requests: dict[int, tuple[int, asyncio.Future[Acted]]] = {}  # -> (worker, answer)
+        self._samples: dict[int, tuple[int, asyncio.Future[Sampled]]] = {}  # the same, for Sample
         self._next = 0
         self._next_request = 0
         self._gone: set[int] = set()  # workers whose process exited: a request fails at once
@@ -153,7 +163,9 @@ class WorkerPool:
         self._pending[cfg.id] = fut
         self.send(worker, Open(cfg))
         opened = await fut
-        return WorkerDevice(cfg.id, opened.description, self, worker, opened.capabilities), opened.family
+        proxy = WorkerDevice(cfg.id, opened.description, self, worker, opened.capabilities,
+                             opened.raw_signals)
+        return proxy, opened.family
 
     async def request(self, worker: int, device_id: str, action: str,
                       timeout_s: float) -> tuple[str, WottHubError | None, Report | None]:
@@ -179,6 +191,35 @@ class WorkerPool:
         name, message = acted.error
         return acted.detail, _ERRORS.get(name, DriverError)(message), acted.report
 
+    async def sample(self, worker: int, device_id: str, signal: str, timeout_s: float) -> RawSample | None:
+        """Send ``Sample`` and await its ``Sampled``: the sample (None: no frame yet), or the worker's
+        error as its ``wott_hub.errors`` class; ``DriverError`` after ``timeout_s``, ``WorkerDied`` as for
+        ``request``."""
+        import numpy as np
+
+        from wott_hub.tactile.raw import RawSample
+
+        if worker in self._gone:
+            raise WorkerDied(f"device {device_id!r}: its worker process exited")
+        self._next_request += 1
+        req = self._next_request
+        fut: asyncio.Future[Sampled] = self._loop.create_future()
+        self._samples[req] = (worker, fut)
+        self.send(worker, Sample(device_id, req, signal))
+        try:
+            got = await asyncio.wait_for(fut, timeout_s)
+        except TimeoutError:
+            raise DriverError(f"device {device_id!r}: its worker process did not answer a read of "
+                              f"{signal!r} within {timeout_s:g} s") from None
+        finally:
+            self._samples.pop(req, None)
+        if got.error is not None:
+            name, message = got.error
+            raise _ERRORS.get(name, DriverError)(message)
+        if got.data is None:
+            return None
+        return RawSample(got.t_ns, np.frombuffer(got.data, np.dtype(got.dtype)).reshape(got.shape))
+
     def _answered(self, acted: Acted) -> None:
         entry = self._requests.get(acted.request)
         if entry is not None and not entry[1].done():
@@ -186,7 +227,9 @@ class WorkerPool:
 
     def _worker_gone(self, worker: int) -> None:
         self._gone.add(worker)
-        for w, fut in list(self._requests.values()):
+        waiting: list[tuple[int, asyncio.Future[Acted]] | tuple[int, asyncio.Future[Sampled]]] = [
+            *self._requests.values(), *self._samples.values()]
+        for w, fut in waiting:
             if w == worker and not fut.done():
                 fut.set_exception(WorkerDied("the device's worker process exited before answering"))
 
@@ -211,6 +254,10 @@ class WorkerPool:
                 events.on_health(msg.reports)
             elif isinstance(msg, Acted):
                 self._answered(msg)
+            elif isinstance(msg, Sampled):
+                entry = self._samples.get(msg.request)
+                if entry is not None and not entry[1].done():
+                    entry[1].set_result(msg)
             elif isinstance(msg, Ended):
                 events.on_ended(msg.device, msg.reason)
             elif isinstance(msg, Opened):

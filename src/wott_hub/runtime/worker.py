@@ -38,7 +38,20 @@ from wott_hub.errors import WottHubError
 from wott_hub.plugins.isolation import Guard
 
 from .capabilities import driver_capabilities
-from .messages import Act, Acted, Close, CloseDevice, Ended, HealthReports, Open, Opened, OpenFailed, Run
+from .messages import (
+    Act,
+    Acted,
+    Close,
+    CloseDevice,
+    Ended,
+    HealthReports,
+    Open,
+    Opened,
+    OpenFailed,
+    Run,
+    Sample,
+    Sampled,
+)
 from .opening import open_driver
 from .outbox import Outbox, PipeSink
 from .pipeline import DevicePipeline
@@ -97,6 +110,8 @@ async def _serve(conn: multiprocessing.connection.Connection) -> None:
                 task = asyncio.create_task(devices.act(msg))
                 acting.add(task)
                 task.add_done_callback(acting.discard)
+            elif isinstance(msg, Sample):
+                devices.sample(msg)
             elif isinstance(msg, CloseDevice):
                 await devices.close(msg.device)
             elif isinstance(msg, Close):
@@ -134,7 +149,8 @@ class _Devices:
             driver = await open_driver(cfg)  # isolated like the hub's (opening.open_driver)
             pipeline = DevicePipeline.of_driver(cfg.id, driver)
             self.by_id[cfg.id] = _Device(cfg, pipeline)
-            self.out.send(Opened(cfg.id, driver.description, cfg.family, driver_capabilities(driver)))
+            self.out.send(Opened(cfg.id, driver.description, cfg.family, driver_capabilities(driver),
+                                 pipeline.raw_signals()))
         except Exception as e:  # a DriverError (or a processor refusing the mesh): the hub reports it
             self.out.send(OpenFailed(cfg.id, str(e)))
 
@@ -185,6 +201,25 @@ class _Devices:
     def resume(self, device_id: str) -> None:
         d = self.by_id[device_id]
         d.task = asyncio.create_task(self._run(d))
+
+    # --- raw signals (the hub's side: runtime.raw) ----------------------------------------------------
+
+    def sample(self, msg: Sample) -> None:
+        """Answer ``Sampled``: the driver's latest sample of ``msg.signal`` as bytes, or the error."""
+        d = self.by_id.get(msg.device)
+        try:
+            if d is None:
+                raise errors.NotFound(f"no device {msg.device!r} in this worker process")
+            sample = d.pipeline.raw_sample(msg.signal)
+        except WottHubError as e:
+            self.out.send(Sampled(msg.request, 0, "", (), None, (type(e).__name__, str(e))))
+            return
+        if sample is None:
+            self.out.send(Sampled(msg.request, 0, "", (), None, None))
+            return
+        array = sample.array
+        self.out.send(Sampled(msg.request, sample.t_ns, array.dtype.str, tuple(array.shape),
+                              array.tobytes(), None))  # tobytes: a C-order copy of any view
 
     # --- device actions (the hub's side: hub.device_actions) ---------------------------------------
 

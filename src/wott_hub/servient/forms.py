@@ -8,13 +8,19 @@ import copy
 from typing import Any, TypeVar
 
 from wott_hub.td.forms import PREFIX, FormLayout
+from wott_hub.td.raw import RAW_TYPES
 
 __all__ = ["PREFIX", "FormLayout", "clean_td", "with_forms"]
 
 
 def with_forms(td: dict[str, Any], thing: str, layout: FormLayout) -> dict[str, Any]:
-    """A copy of ``td`` whose forms and ``base`` are this hub's (e.g. a recorded TD, re-served)."""
+    """A copy of ``td`` whose forms and ``base`` are this hub's (e.g. a recorded TD, re-served). A raw
+    signal's property (``td.raw``) is left out: it is the live device's, nothing of it is recorded."""
     out = copy.deepcopy(td)
+    props = out.get("properties")
+    if isinstance(props, dict):
+        for name in [n for n, a in props.items() if isinstance(a, dict) and a.get("@type") in RAW_TYPES]:
+            del props[name]
     factory = layout.factory(thing)
     for kind, key in (("property", "properties"), ("event", "events")):
         for name, aff in (out.get(key) or {}).items():

@@ -319,7 +319,8 @@ def _iostream(request: HTTPServerRequest) -> IOStream:
 
 
 def routes(ctx: ServingContext) -> list[tuple[Any, ...]]:
-    """The hub's routes, to put before wotpy's in the HTTP server's Application."""
+    """The hub's routes of this module; ``servient.routes.routes`` puts the raw-signal and binary ones
+    (whose handlers build on this module's) before them."""
     k = {"ctx": ctx}
     t = rf"{PREFIX}/(?P<thing_id>[^/]+)"
     return [

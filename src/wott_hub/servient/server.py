@@ -31,7 +31,8 @@ from wott_hub.web import routes as web_routes  # the twin: / and /twin/*
 from .adapters import FastThing, HubHTTPServer, HubServient, HubWebsocketServer
 from .context import ServingContext
 from .forms import FormLayout
-from .http import CatalogueHandler, TDHandler, routes
+from .http import CatalogueHandler, TDHandler
+from .routes import routes
 from .things import ServedThing, ThingRegistry
 from .ws import FastWebsocketHandler
 

@@ -16,6 +16,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wott_hub.events.record import encode
+from wott_hub.td.raw import PRESSURE_GRID, RAW_IMAGE
+from wott_hub.types import RawReads
+
+RAW_PROPERTIES = frozenset({RAW_IMAGE, PRESSURE_GRID})
 
 __all__ = ["ServedThing", "ThingRegistry"]
 
@@ -28,6 +32,7 @@ class ServedThing:
     dynamic: dict[str, Callable[[], str]] = field(default_factory=dict)  # name -> encoded JSON
     record: bool = True
     exposed: Any = None  # the wotpy ExposedThing
+    raw: RawReads | None = None  # a device's raw signals (rawImage, pressureGrid), read on demand
     _td_bytes: bytes | None = None
     _etag: str | None = None
 
@@ -76,9 +81,15 @@ class ServedThing:
             return "null"
         return value
 
+    def is_raw(self, name: str) -> bool:
+        """A raw signal's property (served by the raw routes, encoded only for its reader)."""
+        return self.raw is not None and name in RAW_PROPERTIES
+
     def read_all(self) -> str:
+        """Every property's value but the raw signals' (each has its own forms, read on demand)."""
         # read() is None only for a name the TD lacks, and these names come from the TD
-        return _json_object((n, v) for n in self.property_names if (v := self.read(n)) is not None)
+        return _json_object((n, v) for n in self.property_names
+                            if not self.is_raw(n) and (v := self.read(n)) is not None)
 
     def static_json(self) -> str:
         """The static values as one JSON object (what history records), spliced from the texts

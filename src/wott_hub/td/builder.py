@@ -9,11 +9,13 @@ from importlib import resources
 from typing import Any
 
 from wott_hub.tactile.device import DeviceDescription
+from wott_hub.tactile.raw import RawSignal
 from wott_hub.types import FormFactory
 
 from .actions import declared_actions
 from .defaults import state_defaults
 from .forms import FormLayout
+from .raw import raw_affordances, raw_events
 from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
 
 __all__ = ["build_tactile_td", "static_property_values", "tactile_context"]
@@ -34,11 +36,14 @@ def build_tactile_td(
     forms: FormFactory | None = None,
     context_url: str | None = None,
     actions: tuple[str, ...] = ("tare", "restart"),
+    raw: tuple[RawSignal, ...] = (),
 ) -> dict[str, Any]:
     """The device's TD 1.1 document with the Tactile vocabulary.
 
     ``actions``: the device actions it declares (``wott_hub.td.actions``; the hub
     names those its driver can do); the ``deviceAction`` event recording them is in ``EVENTS``.
+    ``raw``: the device's raw signals (its driver's ``ServesRawSignals``), declared as the
+    properties of ``wott_hub.td.raw``.
 
     Forms follow the hub's layout at ``base`` (``wott_hub.td.forms``) unless a
     binding supplies its own ``forms``. ``context_url`` is where the Tactile
@@ -51,13 +56,13 @@ def build_tactile_td(
     forms = forms or layout.factory(desc.id)
     ctx: list[Any] = [*TD_CONTEXT, context_url or layout.context_url, {"tac": TACTILE_NS}]
     properties = {}
-    for name, schema in PROPERTIES.items():
+    for name, schema in {**PROPERTIES, **raw_affordances(raw)}.items():
         aff = copy.deepcopy(schema)
         aff["title"] = name
         aff["forms"] = forms("property", name, aff)
         properties[name] = aff
     events = {}
-    for name, schema in EVENTS.items():
+    for name, schema in {**EVENTS, **raw_events(raw)}.items():
         aff = copy.deepcopy(schema)
         aff["title"] = name
         aff["forms"] = forms("event", name, aff)

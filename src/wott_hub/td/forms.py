@@ -7,6 +7,11 @@ One HTTP port serves, under ``/wot``:
 - ``GET /wot/<id>/properties``: all property values; ``.../properties/<name>``: one
 - ``GET /wot/<id>/properties/<name>/observe``: SSE stream of an observable property
 - ``GET /wot/<id>/events/<name>``: SSE stream of one event; ``.../events``: of all events
+- ``GET /wot/<id>/events/skinDisplacement/binary``: its binary packets, one HTTP response that never
+  ends (``subprotocol: "stream"``); ``.../binary/ws``: the same as WebSocket binary messages
+- ``GET /wot/<id>/properties/rawImage``, ``pressureGrid`` (devices with raw signals): JSON, or
+  ``?format=png|jpeg|npy``; ``.../stream``: a ``multipart/x-mixed-replace`` JPEG stream, an SSE
+  stream of grids (``td.raw``)
 - ``POST /wot/<id>/actions/<name>``: invoke an action (JSON input and output)
 - ``GET /contexts/tactile-v1.jsonld``: the Tactile JSON-LD context
 
@@ -35,16 +40,27 @@ from urllib.parse import quote
 
 from slugify import slugify
 
+from wott_hub.events.fields import CONTENT_TYPE as DISPLACEMENT_BINARY
+from wott_hub.events.fields import SKIN_DISPLACEMENT
 from wott_hub.types import FormFactory
 
 from .mqtt import MqttLayout
+from .raw import PRESSURE_GRID, RAW_IMAGE, RAW_TYPES
 
-__all__ = ["CONTEXT_PATH", "PREFIX", "FormLayout"]
+__all__ = ["BINARY_EVENTS", "CONTEXT_PATH", "NPY", "PREFIX", "STREAM", "FormLayout"]
 
 CONTEXT_PATH = "contexts/tactile-v1.jsonld"
 
 PREFIX = "/wot"
 JSON = "application/json"
+NPY = "application/x-npy"
+"""NumPy's .npy file (its header then the array), the media type NumPy-serving tools use."""
+STREAM = "stream"
+"""The subprotocol of an HTTP form whose one GET response never ends: messages follow one another, framed
+as its contentType says (self-delimiting packets, multipart parts). SSE forms say ``sse``."""
+MULTIPART = "multipart/x-mixed-replace;boundary=frame"
+BINARY_EVENTS = {SKIN_DISPLACEMENT: DISPLACEMENT_BINARY}
+"""Events with a binary form: name -> its contentType."""
 
 
 @dataclass(frozen=True)
@@ -72,7 +88,16 @@ class FormLayout:
         mqtt = self.mqtt
 
         def forms(kind: str, name: str, affordance: dict[str, Any]) -> list[dict[str, Any]]:
+            if kind == "property" and affordance.get("@type") in RAW_TYPES:
+                return _raw_forms(f"{base}/properties/{quote(name, safe='')}", name)
             out = _forms(kind, name, affordance)
+            if kind == "event" and name in BINARY_EVENTS:
+                href = f"{base}/events/{quote(name, safe='')}/binary"
+                ops = ["subscribeevent", "unsubscribeevent"]
+                out.append({"href": href, "op": ops, "htv:methodName": "GET", "subprotocol": STREAM,
+                            "contentType": BINARY_EVENTS[name]})
+                ws_href = href.replace("http", "ws", 1) + "/ws"
+                out.append({"href": ws_href, "op": ops, "contentType": BINARY_EVENTS[name]})
             if mqtt is not None:  # after HTTP and WebSocket: clients that know only those are unchanged
                 out += mqtt.forms(thing, kind, name, affordance)
             return out
@@ -103,6 +128,11 @@ class FormLayout:
 
         return forms
 
+    def raw_paths(self, thing: str) -> dict[str, str]:
+        """Where a device's raw-signal properties are read (for the twin and tests)."""
+        base = self.thing_url(thing)
+        return {name: f"{base}/properties/{name}" for name in (RAW_IMAGE, PRESSURE_GRID)}
+
     def thing_forms(self, thing: str) -> list[dict[str, Any]]:
         base = self.thing_url(thing)
         return [
@@ -111,3 +141,19 @@ class FormLayout:
             {"href": f"{base}/events", "op": ["subscribeallevents", "unsubscribeallevents"],
              "htv:methodName": "GET", "subprotocol": "sse", "contentType": JSON},
         ]
+
+
+def _raw_forms(href: str, name: str) -> list[dict[str, Any]]:
+    """A raw signal's forms: JSON first and with a plain href (wotpy reads a property through its first HTTP
+    form, as it is, and decodes JSON), then the binary media types, then the stream."""
+    read = {"op": ["readproperty"], "htv:methodName": "GET"}
+    observe = {"op": ["observeproperty", "unobserveproperty"], "htv:methodName": "GET", "subprotocol": STREAM}
+    if name == RAW_IMAGE:
+        return [{"href": href, **read, "contentType": JSON},
+                {"href": f"{href}?format=png{{&camera}}", **read, "contentType": "image/png"},
+                {"href": f"{href}?format=jpeg{{&camera}}", **read, "contentType": "image/jpeg"},
+                {"href": f"{href}?format=npy{{&camera}}", **read, "contentType": NPY},
+                {"href": f"{href}/stream{{?camera,maxRate}}", **observe, "contentType": MULTIPART}]
+    return [{"href": href, **read, "contentType": JSON},
+            {"href": f"{href}?format=npy", **read, "contentType": NPY},
+            {"href": f"{href}/stream{{?maxRate}}", **observe, "subprotocol": "sse", "contentType": JSON}]

@@ -5,13 +5,16 @@ One topic per affordance, under the hub's prefix (default ``wott/<hub-id>``)::
     <prefix>/<thing>/events/<name>       every event                 (not retained)
     <prefix>/<thing>/properties/<name>   each observable property change (retained: the last value)
     <prefix>/<thing>/td                  the Thing's TD              (retained, QoS 1; empty when it goes)
+    <prefix>/<thing>/binary/events/<name>  an event's binary form (``skinDisplacement``: the packet
+                                         layout of docs/tactile-td.md), beside its JSON topic; not
+                                         under ``events/``, so ``wott/+/+/events/#`` stays JSON only
 
 ``<thing>`` is the short name of the hub's URL paths (``barrel-1``, ``hub``), so a
 fleet is one subscription: ``wott/+/+/events/#``.
 
 QoS, chosen for what each message is worth against what it costs:
 
-- ``skinDeformedDetection`` (one per frame, 30-1000 Hz per device): ``event_qos``,
+- ``skinDeformedDetection`` and ``skinDisplacement`` (one per frame, 30-1000 Hz per device): ``event_qos``,
   0 by default. A lost one is superseded by the next frame a few ms later, the
   hub's history and SSE resume hold every one, and QoS 1 doubles the packets and
   makes the broker keep per-subscriber state for a stream nobody re-reads.
@@ -36,12 +39,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["HIGH_RATE_EVENTS", "HIGH_RATE_PROPERTIES", "MQV_CONTEXT", "MqttLayout"]
+from wott_hub.events.fields import CONTENT_TYPE as DISPLACEMENT_BINARY
+from wott_hub.events.fields import SKIN_DISPLACEMENT
+
+__all__ = ["BINARY_EVENTS", "HIGH_RATE_EVENTS", "HIGH_RATE_PROPERTIES", "MQV_CONTEXT", "MqttLayout"]
 
 MQV_CONTEXT = {"mqv": "https://www.w3.org/2019/wot/mqtt#"}
 """The prefix the binding template's context defines for its terms."""
 
-HIGH_RATE_EVENTS = frozenset({"skinDeformedDetection"})
+HIGH_RATE_EVENTS = frozenset({"skinDeformedDetection", SKIN_DISPLACEMENT})
+BINARY_EVENTS = {SKIN_DISPLACEMENT: DISPLACEMENT_BINARY}
+"""Events also published in a binary form (on ``binary_topic``): name -> its contentType."""
 HIGH_RATE_PROPERTIES = frozenset({"contactInformation"})
 JSON = "application/json"
 
@@ -59,6 +67,9 @@ class MqttLayout:
 
     def property_topic(self, thing: str, name: str) -> str:
         return f"{self.prefix}/{thing}/properties/{name}"
+
+    def binary_topic(self, thing: str, name: str) -> str:
+        return f"{self.prefix}/{thing}/binary/events/{name}"
 
     def td_topic(self, thing: str) -> str:
         return f"{self.prefix}/{thing}/td"
@@ -86,6 +97,10 @@ class MqttLayout:
                                 "mqv:qos": str(self.qos(kind, name))}
         if self.retain(kind):
             form["mqv:retain"] = True
+        if kind == "event" and name in BINARY_EVENTS:
+            binary = self.binary_topic(thing, name)
+            return [form, {**form, "href": f"{self.broker}/{binary}", "mqv:filter": binary,
+                           "contentType": BINARY_EVENTS[name]}]
         return [form]
 
     @staticmethod

@@ -241,5 +241,34 @@ DETAIL_EVENTS: dict[str, dict[str, Any]] = {
         },
     },
 }
+DETAIL_EVENTS["skinDisplacement"] = {
+    "@type": "tac:SkinDisplacement",
+    "description": (
+        "The nodes and frames of skinDeformedDetection with each node's displacement vector (mm, in the "
+        "sensorCoordinateFrame; its norm is that node's deformedNodeIntensity within the 1 µm "
+        "quantisation of both), so that direction and shear leave the hub; one final packet lists the "
+        "previously displaced nodes with zero vectors. Also in a binary form (the form's contentType "
+        "application/vnd.wott.skin-displacement; byte layout in docs/tactile-td.md)."
+    ),
+    "data": {
+        "type": "object",
+        "properties": {
+            "timeStamp": {"type": "integer", "minimum": 0, "unit": "ns"},
+            "numOfDisplacedNodes": {"type": "integer", "minimum": 0},
+            "arrayOfDisplacedNodes": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "properties": {
+                        "nodeID": {"type": "integer", "minimum": 0},
+                        "displacement": xyz("mm"),
+                    },
+                    "required": ["nodeID", "displacement"],
+                },
+            },
+        },
+        "required": ["timeStamp", "numOfDisplacedNodes", "arrayOfDisplacedNodes"],
+    },
+}
 DETAIL_EVENTS.update(DEVICE_ACTION_EVENT)  # each device action invoked (tare, restart...: td/actions.py)
 EVENTS.update(DETAIL_EVENTS)  # declared with the paper's events; validate.py does not require them

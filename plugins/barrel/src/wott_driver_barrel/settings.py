@@ -21,6 +21,7 @@ from wott_hub.plugin_api import (
     MATERIALS,
     DeviceDescription,
     Meta,
+    RawSignal,
     SettingsError,
     SettingsTable,
     SkinShape,
@@ -183,4 +184,6 @@ def open_barrel(device_id: str, settings: Mapping[str, Any], *,
     driver = BarrelDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
                           max_frames=max_frames)
     driver.below_threshold_s = s.below_threshold_s
+    driver.raw_signals = tuple(RawSignal(cam.name, "image", (cam.height, cam.width), rate_hz=float(s.fps),
+                                         record_hz=float(s.record_raw_hz)) for cam in layout.cameras)
     return driver

@@ -19,6 +19,7 @@ from wott_hub.plugin_api import (
     CoordinateFrame,
     DeviceDescription,
     Meta,
+    RawSignal,
     SettingsError,
     SettingsTable,
     SkinShape,
@@ -177,6 +178,9 @@ def open_pad(device_id: str, settings: Mapping[str, Any], *, max_frames: int | N
     driver = FlatPadDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
                            max_frames=max_frames, prepare=prepare)
     driver.below_threshold_s = s.below_threshold_s
+    optics = layout.optics
+    driver.raw_signals = (RawSignal("camera", "image", (optics.height, optics.width), rate_hz=float(s.fps),
+                                    record_hz=float(s.record_raw_hz)),)
     return driver
 
 

@@ -12,6 +12,9 @@ Frame times are the board's cadence on the hub's clock (``FrameClock``: its
 sequence numbers against the arrival times, fitted), not the arrival times
 themselves, which bunch and stretch with the reads; each ``frames()`` call starts
 a new line.
+
+Raw signal (``ServesRawSignals``): the pressure grid, rows x cols kPa, the last frame's
+(a reference to the array the frame carries, reshaped as a view when read).
 """
 
 from __future__ import annotations
@@ -28,6 +31,9 @@ from wott_hub.plugin_api import (
     Driver,
     DriverError,
     Health,
+    RawSample,
+    RawSignal,
+    ServesRawSignals,
     TactileFrame,
     Tareable,
 )
@@ -41,7 +47,7 @@ from .simulator import TaxelSimulator
 __all__ = ["TaxelDriver"]
 
 
-class TaxelDriver(Driver, Tareable):
+class TaxelDriver(Driver, Tareable, ServesRawSignals):
     """A rows x cols taxel array on ``port`` (or on its own simulator's pty).
 
     Each taxel's pressure becomes an inward displacement along the mesh
@@ -87,6 +93,9 @@ class TaxelDriver(Driver, Tareable):
         self._inward = -description.mesh.normals
         self._zero: np.ndarray | None = None  # counts at rest after a tare, subtracted from every frame
         self._tare_next = False
+        rate = float(simulator.rate_hz) if simulator is not None else 0.0
+        self.raw_signals = (RawSignal("pressure", "grid", shape, unit="kPa", rate_hz=rate),)
+        self._pressure: tuple[int, np.ndarray] | None = None  # the last frame's (t_ns, kPa per taxel)
         self.set_health(Health.disconnected, "not started")
 
     async def frames(self) -> AsyncIterator[TactileFrame]:
@@ -114,6 +123,7 @@ class TaxelDriver(Driver, Tareable):
                     counts = np.maximum(counts - self._zero, 0.0)
                 frame = TactileFrame(t_ns, compliance.normal_mm(counts)[:, None] * self._inward,
                                      pressure=compliance.pressure_kpa(counts))
+                self._pressure = (t_ns, frame.pressure)  # type: ignore[assignment]  # set just above
                 if self._failure:
                     self._failure = ""
                     self.set_health(*self._link_health)
@@ -130,6 +140,13 @@ class TaxelDriver(Driver, Tareable):
         """Zero offsets: the next frame's readings become every taxel's zero (drift, a preloaded skin)."""
         self._tare_next = True
         return "the next frame's readings are each taxel's new zero"
+
+    def raw_sample(self, name: str) -> RawSample | None:
+        """The pressure grid of the last frame, rows x cols kPa (``name`` ``"pressure"``)."""
+        last = self._pressure
+        if name != "pressure" or last is None:
+            return None
+        return RawSample(last[0], last[1].reshape(self.shape))
 
     def _on_link_health(self, state: Health, reason: str) -> None:
         """The reader's health (from its thread), with the cause of the last failure while it stands."""

@@ -49,6 +49,11 @@ open; and releasing a reader (``close()``, the end of ``frames()``) waits at mos
 ``RELEASE_TIMEOUT_S`` (a reader stuck in a read keeps the lock). Whatever is still
 stuck then is left to its daemon thread: an open that returns after ``close()``
 releases what it opened.
+
+Raw signals (``ServesRawSignals``): each camera's latest image, one ``RawSignal`` per name of
+``raw_signals`` (set by the family when it opens the device: its cameras' names and sizes). The
+worker thread keeps a reference to the last frame it read (one assignment per frame, no copy);
+``raw_sample`` hands it out as H x W grey or H x W x 3 RGB (a camera's BGR, reversed as a view).
 """
 
 from __future__ import annotations
@@ -69,8 +74,11 @@ from wott_hub.plugin_api import (
     Driver,
     Health,
     NoisyAtRest,
+    RawSample,
+    RawSignal,
     Recalibratable,
     ReportsUnavailableNodes,
+    ServesRawSignals,
     TactileFrame,
     Tareable,
 )
@@ -183,7 +191,7 @@ class _SourceEnded(Exception):
     """A finite simulated source played to its end: the device is done, not lost (``frames()`` ends)."""
 
 
-class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavailableNodes):
+class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavailableNodes, ServesRawSignals):
     """One camera-based skin: ``open_source()`` makes a reader, the estimator turns frames into D.
 
     A subclass names what its estimator raises while the frame shows no grid
@@ -237,6 +245,8 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         self.clamped_frames = 0
         self._frame_t_ns = 0  # time of the frame being estimated (``_estimate`` reads it)
         self._rest_request: str | None = None  # "tare" | "recalibrate", done on the next frame read
+        self.raw_signals: tuple[RawSignal, ...] = ()  # the cameras, in the order a frame holds them
+        self._raw: tuple[int, Any] | None = None  # (t_ns, images) of the last frame read: a reference
 
     @abc.abstractmethod
     def _estimate(self, images: Any) -> np.ndarray | None:
@@ -326,6 +336,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             raise _SourceLost(getattr(reader, "failure", "")
                              or f"{self.source_name} returned no frame (unplugged, or end of stream)")
         self._last_t_ns = max(self._last_t_ns, t_ns)
+        self._raw = (t_ns, images)  # one assignment: raw_sample reads it on the loop
         request, self._rest_request = self._rest_request, None
         if request is not None and self.estimator.has_reference:
             self._take_rest(request, images)
@@ -342,6 +353,21 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             displacement = np.zeros((self.description.mesh.n_nodes, 3))  # the rest frame itself
         self.last_truth = truth
         return None if displacement is None else TactileFrame(t_ns, displacement)
+
+    # -- raw signals (``ServesRawSignals``): the last frame read, as it is ---------------------------
+    def raw_sample(self, name: str) -> RawSample | None:
+        raw = self._raw
+        if raw is None:
+            return None
+        t_ns, images = raw
+        frames = images if isinstance(images, tuple | list) else (images,)
+        for signal, image in zip(self.raw_signals, frames, strict=False):
+            if signal.name == name:
+                image = np.asarray(image)
+                if image.ndim == 3 and image.shape[2] == 3:
+                    image = image[..., ::-1]  # OpenCV's BGR as RGB, a view
+                return RawSample(t_ns, image)
+        return None
 
     # -- device actions (``Tareable``, ``Recalibratable``): requested on the loop, done in the thread --
     def tare(self) -> str:

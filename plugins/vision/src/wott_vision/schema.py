@@ -33,6 +33,10 @@ class VisionSettings(BackoffSettings):
     below_threshold_s: Annotated[float, Meta(ge=0, le=3600, description=(
         "Report 'below threshold' in the health after a press stays between 0.75 and 1 x epsilon "
         "this long, s; 0: never."))] = 1.0
+    record_raw_hz: Annotated[float, Meta(ge=0, le=30, description=(
+        "Record each camera's image in history this often, images/s (PNG, ~0.8 GB per camera-hour "
+        "at 1 image/s for 640 x 480: docs/tactile-td.md); 0: never, the default. Live reads and "
+        "streams of the images need no recording."))] = 0.0
 
 
 FPS_DESCRIPTION = ("Simulator frame rate, frames/s; for an image sequence its recorded rate; for a video "

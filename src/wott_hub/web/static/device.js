@@ -1,4 +1,7 @@
-// The device page: the skin as a 3D mesh from its TD, deformed live by skinDeformedDetection.
+// The device page: the skin as a 3D mesh from its TD, deformed live by skinDisplacement (each
+// node moved by its vector, shear drawn as arrows) or, from a Thing that does not declare it, by
+// skinDeformedDetection (along the inward normal); contact forces as arrows, and for a camera
+// device the live raw image (its rawImage stream form: an <img> the browser keeps replacing).
 //
 // Events arrive at up to the device's frame rate (120 Hz and more); the page draws at most once
 // per display frame. Every packet is the complete deformed set, so only the newest one matters:
@@ -8,15 +11,20 @@
 // only the nodes the packet changed (render3d.js), so it costs a few ms and messages never wait
 // behind it (plotly's whole-mesh restyle took 200-270 ms; issue 18).
 
-import {Skin} from "./skin.js";
+import {Skin, toPacket} from "./skin.js";
 import {COLOUR_STOPS, SkinView} from "./render3d.js";
 import {ReplayControl} from "./replay.js";
-import {discover, getJSON, hubKeyOf, now, observeProperty, readProperty, subscribeEvents} from "./wot.js";
+import {discover, getJSON, href, hubKeyOf, now, observeProperty, readProperty, subscribeEvents, withToken} from "./wot.js";
 
 const WINDOW = 120; // delay samples kept for the panel's median and p95
 const LOG = 100000; // delay samples kept for the benchmark (window.__twinStats)
 
 const state = (window.twin = {
+  // what the browser tests read of the geometry drawn: a vertex's vector, rest and drawn position, the scale
+  skinState: () => {
+    const s = view.skin, P = view3d.pos.array, at = (a, k) => [a[3 * k], a[3 * k + 1], a[3 * k + 2]];
+    return {scale, vec: (k) => (s.hasVec[k] ? at(s.vec, k) : null), rest: (k) => at(s.rest, k), pos: (k) => at(P, k)};
+  },
   page: "device", ready: false, thing: null, title: null, mode: "live", nodes: 0, cells: 0,
   packets: 0, frames: 0, last: null, applied: null, drawn: null, onsets: [], seqs: [], stream: null, reconnects: 0,
   action: null, actions: [], contacts: 0, contactIds: [], marks: [], delays: {net: [], draw: [], e2e: []},
@@ -32,6 +40,9 @@ let pending = null; // newest packet not drawn yet
 let pendingContacts = null;
 let drewInFrame = false; // a draw already happened in this display frame
 let scale = 1;
+let arrowGain = 5; // shear arrows: this many times the shear (the page's "arrows" control; 0: off)
+const MM_PER_N = 10; // contact force arrows: length per newton
+let pendingForces = null; // the last contactInformation value not drawn as arrows yet
 
 // What the benchmark (wott-hub bench twin) and the tests read: every delay sample since reset(),
 // and the packet accounting: packets = coalesced (drawn, or replaced by a newer packet that was
@@ -80,18 +91,24 @@ async function show(tdUrl, {after = null, mode = "live"} = {}) {
   $("mesh").textContent = `${skin.n} nodes, ${skin.cells} cells`;
   document.title = `wott-hub · ${td.title}`;
   drawMesh(skin);
-  const v = (view = {td, skin, streams: [], contactStream: null, url: tdUrl});
+  const vectors = !!(td.events || {}).skinDisplacement; // the geometry from the vectors
+  state.vectors = vectors;
+  const v = (view = {td, skin, streams: [], contactStream: null, url: tdUrl, vectors});
   if (contacts) setContacts(contacts);
-  // every event the TD declares (actionDetails too), though only two are drawn
+  if (contacts) pendingForces = contacts;
+  // every event the TD declares (actionDetails too), though only a few are drawn
   v.streams = subscribeEvents(td, Object.keys(td.events || {}), (name, data, id) => {
     state.seqs.push(Number(id)); // every event id of the stream, to check resumes lose nothing
     if (state.seqs.length > 50000) state.seqs.splice(0, 25000);
-    if (name === "skinDeformedDetection") onPacket(data, id);
-    else if (name === "actionDetection") onAction(data);
+    if (name === (vectors ? "skinDisplacement" : "skinDeformedDetection")) {
+      onPacket(vectors ? toPacket(data) : data, id);
+    } else if (name === "actionDetection") onAction(data);
   }, {after, onState: streamState});
   v.contactStream = observeProperty(td, "contactInformation", (value) => {
     pendingContacts = value;
+    pendingForces = value;
   });
+  showRawImage(td);
   state.stream = v.streams[0].url;
   state.ready = true;
   return td;
@@ -104,7 +121,9 @@ function detach() {
   if (view.contactStream) view.contactStream.close();
   view.streams = [];
   view.contactStream = null;
-  pending = pendingContacts = null;
+  pending = pendingContacts = pendingForces = null;
+  const img = $("raw-image");
+  if (img) img.removeAttribute("src"); // ends the image stream
   log.dropped += log.waiting; // packets of a view left before they were drawn
   log.waiting = 0;
 }
@@ -124,6 +143,9 @@ function drawMesh(skin) {
   plot.data = [{
     type: "mesh", renderer: "three.js",
     get x() { return view3d.pos.array.filter((_, k) => k % 3 === 0); },
+    get y() { return view3d.pos.array.filter((_, k) => k % 3 === 1); },
+    get z() { return view3d.pos.array.filter((_, k) => k % 3 === 2); },
+    get rest() { return Array.from(skin.rest); },
     get i() { return skin.i; },
     get intensity() { return skin.intensity; },
   }];
@@ -222,6 +244,11 @@ function frame() {
       pendingContacts = null;
     }
     if (pending) draw();
+    if (pendingForces && view3d) {
+      view3d.setForces(pendingForces.contactLocations || [], pendingForces.contactForces || [], MM_PER_N);
+      state.forces = view3d.nForces;
+      pendingForces = null;
+    }
   }
   // a camera move, a resize or contacts: also while the picture is held
   if (!drewInFrame && view3d && view3d.needsRender) {
@@ -247,6 +274,10 @@ function draw() {
     colourBar();
   }
   view3d.update(!!job.redraw);
+  if (view.vectors) {
+    const longest = view3d.setShear(skin.shear(), scale * arrowGain);
+    state.shear = {n: view3d.nShear, max: longest};
+  }
   view3d.render();
   drewInFrame = true;
   log.draws++;
@@ -297,10 +328,17 @@ async function main() {
     state.freeze = e.target.checked;
     if (!state.freeze) requestDraw();
   };
-  $("exaggerate").onchange = (e) => {
-    scale = Number(e.target.value);
+  const redraw = () => {
     if (view && state.last) pending = pending || {packet: lastPacket(), seq: state.last.seq, at: now(),
       max: state.last.max, stamp: state.last.stamp, redraw: true};
+  };
+  $("exaggerate").onchange = (e) => {
+    scale = Number(e.target.value);
+    redraw();
+  };
+  $("arrows").onchange = (e) => {
+    arrowGain = Number(e.target.value);
+    redraw();
   };
   const td = await show(tdUrl);
   requestAnimationFrame(frame);
@@ -327,11 +365,42 @@ async function main() {
 }
 
 function lastPacket() {
-  // redraw the last packet at a new scale: the skin keeps its intensities
+  // redraw the last packet at a new scale: the skin keeps its intensities (and vectors)
   const skin = view.skin, nodes = [];
-  for (const [id, k] of skin.index) if (skin.intensity[k] > 0) nodes.push({deformedNodeID: id,
-    deformedNodeIntensity: skin.intensity[k]});
+  for (const [id, k] of skin.index) {
+    if (!(skin.intensity[k] > 0)) continue;
+    const node = {deformedNodeID: id, deformedNodeIntensity: skin.intensity[k]};
+    if (skin.hasVec[k]) node.displacement = {x: skin.vec[3 * k], y: skin.vec[3 * k + 1], z: skin.vec[3 * k + 2]};
+    nodes.push(node);
+  }
   return {numOfDeformedNodes: nodes.length, arrayOfDeformedNodes: nodes};
+}
+
+// A camera device: its live image, the rawImage property's stream form (multipart/x-mixed-replace
+// JPEG parts at maxRate) as an <img> source; a select when it has several cameras.
+const RAW_RATE = 10;
+
+function showRawImage(td) {
+  const panel = $("raw-panel"), img = $("raw-image"), select = $("camera");
+  const aff = (td.properties || {}).rawImage;
+  const form = aff && (aff.forms || []).find((f) => (Array.isArray(f.op) ? f.op : [f.op]).includes("observeproperty")
+    && String(f.contentType || "").startsWith("multipart/x-mixed-replace"));
+  state.raw = null;
+  if (!panel) return;
+  panel.hidden = !form;
+  if (!form) return;
+  const cameras = ((aff.uriVariables || {}).camera || {}).enum || [];
+  select.replaceChildren(...cameras.map((c) => Object.assign(document.createElement("option"), {value: c, textContent: c})));
+  select.hidden = cameras.length < 2;
+  const start = () => {
+    const u = new URL(href(td, form));
+    if (select.value) u.searchParams.set("camera", select.value);
+    u.searchParams.set("maxRate", String(RAW_RATE));
+    img.src = withToken(u.href);
+    state.raw = {camera: select.value, src: u.href};
+  };
+  select.onchange = start;
+  start();
 }
 
 main().catch(showError);

@@ -96,6 +96,8 @@ export class SkinView {
       this.needsRender = true;
       if (onChange) onChange();
     });
+    this.span = span;
+    this.addArrows(n);
     this.markers = [];
     this.markerGeometry = new THREE.OctahedronGeometry(Math.max(span / 70, 1));
     this.markerSize = Math.max(span / 70, 1); // the diamond's radius at full force
@@ -281,6 +283,72 @@ export class SkinView {
       this.labels.set(id, texture);
     }
     return texture;
+  }
+
+  // Shear arrows (one line per displaced node, its vector's tangential part) and contact forces
+  // (an arrow per contact): layers of their own over the skin, rewritten whole at each draw.
+  addArrows(n) {
+    const g = (this.shearGeometry = new THREE.BufferGeometry());
+    this.shearPos = new THREE.BufferAttribute(new Float32Array(6 * Math.max(n, 1)), 3)
+      .setUsage(THREE.DynamicDrawUsage);
+    g.setAttribute("position", this.shearPos);
+    g.setDrawRange(0, 0);
+    this.shearLines = new THREE.LineSegments(g, new THREE.LineBasicMaterial({color: 0x1f4e9a}));
+    this.shearLines.frustumCulled = false;
+    this.scene.add(this.shearLines);
+    this.forceArrows = [];
+    this.nShear = 0;
+    this.nForces = 0;
+  }
+
+  // ``rows``: [vertex, tx, ty, tz] (Skin.shear); each arrow starts at the vertex as drawn and is
+  // ``gain`` times the shear long. Returns the longest shear (mm).
+  setShear(rows, gain) {
+    const P = this.pos.array, L = this.shearPos.array;
+    let m = 0, longest = 0;
+    for (const [v, tx, ty, tz] of rows) {
+      const len = Math.hypot(tx, ty, tz);
+      if (!(len > 0) || gain <= 0) continue;
+      longest = Math.max(longest, len);
+      L[6 * m] = P[3 * v];
+      L[6 * m + 1] = P[3 * v + 1];
+      L[6 * m + 2] = P[3 * v + 2];
+      L[6 * m + 3] = P[3 * v] + gain * tx;
+      L[6 * m + 4] = P[3 * v + 1] + gain * ty;
+      L[6 * m + 5] = P[3 * v + 2] + gain * tz;
+      m++;
+    }
+    this.nShear = m;
+    this.shearGeometry.setDrawRange(0, 2 * m);
+    this.shearPos.clearUpdateRanges();
+    this.shearPos.addUpdateRange(0, 6 * m);
+    this.shearPos.needsUpdate = true;
+    this.needsRender = true;
+    return longest;
+  }
+
+  // One arrow per contact: from its location along its force (on the skin), ``mmPerN`` mm per newton.
+  setForces(locations, forces, mmPerN) {
+    const k = Math.min(locations.length, forces.length);
+    while (this.forceArrows.length < k) {
+      const a = new THREE.ArrowHelper(new THREE.Vector3(0, 0, -1), new THREE.Vector3(), 1, 0xb5179e);
+      this.scene.add(a);
+      this.forceArrows.push(a);
+    }
+    const dir = new THREE.Vector3();
+    this.forceArrows.forEach((a, i) => {
+      const f = i < k ? forces[i] : null;
+      const len = f ? Math.hypot(f.x, f.y, f.z) * mmPerN : 0;
+      a.visible = len > 0;
+      if (!a.visible) return;
+      const p = locations[i];
+      dir.set(f.x, f.y, f.z).normalize();
+      a.position.set(p.x - dir.x * len, p.y - dir.y * len, p.z - dir.z * len); // the tip on the contact
+      a.setDirection(dir);
+      a.setLength(len, Math.min(len * 0.3, this.span / 25), Math.min(len * 0.15, this.span / 50));
+    });
+    this.nForces = this.forceArrows.filter((a) => a.visible).length;
+    this.needsRender = true;
   }
 
   render() {

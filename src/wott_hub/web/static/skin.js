@@ -1,11 +1,12 @@
 // The skin's geometry, built from the TD's skinNodes and skinCells values alone.
 //
-// A skinDeformedDetection packet carries only each deformed node's displacement
-// norm (mm), not its direction; the twin shows it along the inward normal (how
-// a press deforms a skin), which is exact for normal presses and an
-// approximation for shear. Nodes absent from a packet are at rest (the packet is
-// the complete deformed set; docs/processing.md), so a packet moves the nodes it
-// names and returns those the previous one named to rest: nothing else changes.
+// A skinDisplacement packet carries each displaced node's vector (mm, the sensor's frame): the
+// twin moves the node by it (times the page's scale), so shear and direction show as a change of
+// shape. A skinDeformedDetection packet carries only the norm; from a Thing that does not declare
+// skinDisplacement the twin shows it along the inward normal (how a press deforms a skin), exact
+// for normal presses and an approximation for shear. Nodes absent from a packet are at rest (the
+// packet is the complete deformed set; docs/processing.md), so a packet moves the nodes it names
+// and returns those the previous one named to rest: nothing else changes.
 
 export class Skin {
   constructor(skinNodes, skinCells) {
@@ -40,6 +41,8 @@ export class Skin {
     }
     this.normals = this._normals();
     this.intensity = new Float64Array(n);
+    this.vec = new Float64Array(3 * n); // each node's displacement vector, where a packet gave one
+    this.hasVec = new Uint8Array(n);
     this.x = new Float64Array(n);
     this.y = new Float64Array(n);
     this.z = new Float64Array(n);
@@ -121,10 +124,18 @@ export class Skin {
       }
     }
     let na = 0, max = 0;
+    const V = this.vec, hasVec = this.hasVec;
     for (const d of packet.arrayOfDeformedNodes || []) {
       const k = this.index.get(d.deformedNodeID);
       if (k === undefined) continue;
       const v = d.deformedNodeIntensity;
+      const u = d.displacement; // a skinDisplacement packet's vector (toPacket below)
+      hasVec[k] = u ? 1 : 0;
+      if (u) {
+        V[3 * k] = u.x;
+        V[3 * k + 1] = u.y;
+        V[3 * k + 2] = u.z;
+      }
       if (I[k] === 0 && v !== 0) act[na++] = k; // a node named twice is listed once
       I[k] = v;
       if (v > max) max = v;
@@ -138,11 +149,41 @@ export class Skin {
     this.nChanged = nc;
     const r = this.rest, nrm = this.normals;
     for (let c = 0; c < nc; c++) {
-      const v = ch[c], s = I[v] * scale;
+      const v = ch[c];
+      if (hasVec[v] && I[v] > 0) { // the node's own vector
+        this.x[v] = r[3 * v] + scale * V[3 * v];
+        this.y[v] = r[3 * v + 1] + scale * V[3 * v + 1];
+        this.z[v] = r[3 * v + 2] + scale * V[3 * v + 2];
+        continue;
+      }
+      const s = I[v] * scale;
       this.x[v] = r[3 * v] - s * nrm[3 * v];
       this.y[v] = r[3 * v + 1] - s * nrm[3 * v + 1];
       this.z[v] = r[3 * v + 2] - s * nrm[3 * v + 2];
     }
     return max;
   }
+
+  // The tangential part (shear) of each active node's vector, for the arrows: [k, tx, ty, tz] rows.
+  shear() {
+    const out = [], V = this.vec, nrm = this.normals;
+    for (let a = 0; a < this.nActive; a++) {
+      const k = this.active[a];
+      if (!this.hasVec[k]) continue;
+      const ux = V[3 * k], uy = V[3 * k + 1], uz = V[3 * k + 2];
+      const dn = ux * nrm[3 * k] + uy * nrm[3 * k + 1] + uz * nrm[3 * k + 2];
+      out.push([k, ux - dn * nrm[3 * k], uy - dn * nrm[3 * k + 1], uz - dn * nrm[3 * k + 2]]);
+    }
+    return out;
+  }
+}
+
+// A skinDisplacement packet in the form Skin.apply takes: each node's norm as its intensity (the
+// same, to 1 µm, as the frame's skinDeformedDetection packet) and its vector.
+export function toPacket(displacement) {
+  const nodes = (displacement.arrayOfDisplacedNodes || []).map((d) => {
+    const u = d.displacement;
+    return {deformedNodeID: d.nodeID, deformedNodeIntensity: Math.hypot(u.x, u.y, u.z), displacement: u};
+  });
+  return {timeStamp: displacement.timeStamp, numOfDeformedNodes: nodes.length, arrayOfDeformedNodes: nodes};
 }
