@@ -129,13 +129,15 @@ def test_rosbags_reads_every_message_and_it_equals_history(reader, recorded, tmp
             rest = np.array([[nodes[i][k] for k in "xyz"] for i in ids]) / 1000
             np.testing.assert_allclose(np.column_stack([cloud["x"], cloud["y"], cloud["z"]]), rest, atol=1e-7)
         contacts = [r for r in mine if r.name == "contactInformation"]
+        shown = 0  # arrows on display before each message
         for r, (t_ns, arr), (t2, wrench) in zip(contacts, by_topic[f"/{ns}/contacts/markers"],
                                                 by_topic[f"/{ns}/contacts/wrench"], strict=True):
             value = json.loads(r.data)
             assert t_ns == t2 == r.t_ns
-            assert arr.markers[0].action == 3  # DELETEALL: contacts that ended disappear
-            arrows = arr.markers[1:]
-            assert len(arrows) == value["numOfContacts"]
+            arrows = [m for m in arr.markers if m.action == 0]  # ADD, ids 0..n-1; DELETE the rest shown
+            assert [m.id for m in arrows] == list(range(value["numOfContacts"]))
+            assert [m.id for m in arr.markers if m.action == 2] == list(range(len(arrows), shown))
+            shown = len(arrows)
             force = np.zeros(3)
             torque = np.zeros(3)
             for m, loc, f in zip(arrows, value["contactLocations"], value["contactForces"], strict=True):

@@ -171,11 +171,12 @@ class ThingMapping:
                     data = rec.data
                     out += self._scene("deformation", t, lambda at: enc.deformation(skin_packet(data, t), at))
             elif rec.kind == KIND_PROPERTY and name == CONTACTS:
-                data = rec.data
-                if self._wants("contacts", wanted):
-                    out += self._scene("contacts", t, lambda at: enc.contacts(contacts(data), at))
-                if self._wants("wrench", wanted):
-                    out += enc.wrench(contacts(data), t)
+                if self._wants("contacts", wanted) or self._wants("wrench", wanted):
+                    c = contacts(rec.data)
+                    if self._wants("contacts", wanted):
+                        out += self._scene("contacts", t, lambda at: enc.contacts(c, at))
+                    if self._wants("wrench", wanted):
+                        out += enc.wrench(c, t)
             elif rec.kind == KIND_EVENT and name == DISPLACEMENT_EVENT and self.geom is not None:
                 if self._wants("displacement", wanted):
                     data = rec.data

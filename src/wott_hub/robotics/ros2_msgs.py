@@ -14,9 +14,10 @@ Topics under the Thing's namespace ``/<ns>`` (``names.ros_namespaces``):
   one per ``skinDeformedDetection``;
 - ``skin/displacement``: ``sensor_msgs/msg/PointCloud2`` (x, y, z now; dx, dy, dz; node_id), one per
   ``skinDisplacement``;
-- ``contacts/markers``: ``visualization_msgs/msg/MarkerArray`` (``DELETEALL``, then one ``ARROW``
-  per contact) and ``contacts/wrench``: ``geometry_msgs/msg/WrenchStamped`` (the net force, its
-  torque about the frame's origin), one each per ``contactInformation``;
+- ``contacts/markers``: ``visualization_msgs/msg/MarkerArray`` (one ``ARROW`` per contact, id =
+  its index; ``DELETE`` for the arrows of contacts that ended) and ``contacts/wrench``:
+  ``geometry_msgs/msg/WrenchStamped`` (the net force, its torque about the frame's origin), one
+  each per ``contactInformation``;
 - ``actions``: ``rcl_interfaces/msg/Log`` (name = the Thing id), per ``actionDetection``,
   ``actionDetails``, ``deviceAction``;
 - ``camera/<name>/image_raw`` (``sensor_msgs/msg/Image``) or ``.../image_raw/compressed``
@@ -120,21 +121,26 @@ def tf_static(poses: dict[str, FramePose], t_ns: int) -> Out:
     return Out(ch, t_ns, T.TFMessage(transforms=tfs))
 
 
-def _cloud(t_ns: int, frame: str, names: tuple[str, ...], columns: list[np.ndarray], ids: np.ndarray) -> Any:
-    """A PointCloud2 of float32 ``names`` and a uint32 ``node_id`` per point, little-endian, dense."""
+@functools.cache
+def _fields(names: tuple[str, ...]) -> list[Any]:
     T = _types()
-    dtype = [(n, "<f4") for n in names] + [("node_id", "<u4")]
-    data = np.zeros(len(ids), dtype=dtype)
-    for n, col in zip(names, columns, strict=True):
-        data[n] = col
-    data["node_id"] = ids
     fields = [T.PointField(name=n, offset=4 * i, datatype=T.PointField.FLOAT32, count=1)
               for i, n in enumerate(names)]
     fields.append(T.PointField(name="node_id", offset=4 * len(names), datatype=T.PointField.UINT32, count=1))
-    step = 4 * (len(names) + 1)
-    return T.PointCloud2(header=_header(t_ns, frame), height=1, width=len(ids), fields=fields,
-                         is_bigendian=False, point_step=step, row_step=step * len(ids),
-                         data=data.view(np.uint8).reshape(-1), is_dense=True)
+    return fields
+
+
+def _cloud(t_ns: int, frame: str, names: tuple[str, ...], values: np.ndarray, ids: np.ndarray) -> Any:
+    """A PointCloud2 of float32 ``names`` (the columns of ``values``) and a uint32 ``node_id`` per
+    point, little-endian, dense."""
+    n, k = len(ids), len(names)
+    buf = np.empty((n, k + 1), dtype="<f4")
+    buf[:, :k] = values
+    buf.view("<u4")[:, k] = ids
+    step = 4 * (k + 1)
+    return _types().PointCloud2(header=_header(t_ns, frame), height=1, width=n, fields=_fields(names),
+                                is_bigendian=False, point_step=step, row_step=step * n,
+                                data=buf.view(np.uint8).reshape(-1), is_dense=True)
 
 
 class Ros2Encoder:
@@ -147,6 +153,13 @@ class Ros2Encoder:
         self.ns = ns
         self.geom = geom
         self._channels: dict[str, Channel | None] = {}
+        self._arrows = 0  # arrows shown now (contacts/markers): those beyond the next count are deleted
+        T = _types()
+        self._pose = T.Pose(position=T.Point(x=0.0, y=0.0, z=0.0),
+                            orientation=T.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+        self._forever = T.Duration(sec=0, nanosec=0)
+        self._mesh_file = T.MeshFile(filename="", data=_EMPTY_U8)
+        self._orange = T.ColorRGBA(r=1.0, g=0.55, b=0.0, a=1.0)
 
     def channel(self, kind: str, sub: str = "") -> Channel | None:
         key = f"{kind}:{sub}"
@@ -178,19 +191,18 @@ class Ros2Encoder:
     # --- messages ---------------------------------------------------------------------------
 
     def _marker(self, t_ns: int, ns: str, mid: int, mtype: int, action: int, *, points: Sequence[Any] = (),
-                color: tuple[float, float, float, float] = (0, 0, 0, 0),
+                color: tuple[float, float, float, float] | None = (0, 0, 0, 0),
                 scale: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Any:
         T = _types()
         header = _header(t_ns, self.thing)
         return T.Marker(
-            header=header, ns=ns, id=mid, type=mtype, action=action,
-            pose=T.Pose(position=T.Point(x=0.0, y=0.0, z=0.0),
-                        orientation=T.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+            header=header, ns=ns, id=mid, type=mtype, action=action, pose=self._pose,
             scale=T.Vector3(x=scale[0], y=scale[1], z=scale[2]),
-            color=T.ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3]),
-            lifetime=T.Duration(sec=0, nanosec=0), frame_locked=True, points=list(points), colors=[],
+            color=self._orange if color is None else T.ColorRGBA(r=color[0], g=color[1], b=color[2],
+                                                                 a=color[3]),
+            lifetime=self._forever, frame_locked=True, points=list(points), colors=[],
             texture_resource="", texture=T.CompressedImage(header=header, format="", data=_EMPTY_U8),
-            uv_coordinates=[], text="", mesh_resource="", mesh_file=T.MeshFile(filename="", data=_EMPTY_U8),
+            uv_coordinates=[], text="", mesh_resource="", mesh_file=self._mesh_file,
             mesh_use_embedded_materials=False)
 
     def mesh(self, t_ns: int) -> list[Out]:
@@ -206,9 +218,10 @@ class Ros2Encoder:
         assert geom is not None and ch is not None
         rows = geom.rows_of(packet.ids)
         keep = rows >= 0
-        at = geom.points[rows[keep]]
-        msg = _cloud(packet.t_ns, self.thing, ("x", "y", "z", "intensity"),
-                     [at[:, 0], at[:, 1], at[:, 2], packet.intensity_mm[keep] / 1000.0], packet.ids[keep])
+        values = np.empty((int(keep.sum()), 4))
+        values[:, :3] = geom.points[rows[keep]]
+        values[:, 3] = packet.intensity_mm[keep] / 1000.0
+        msg = _cloud(packet.t_ns, self.thing, ("x", "y", "z", "intensity"), values, packet.ids[keep])
         return [Out(ch, t_ns, msg)]
 
     def displacement(self, d: Displacement, t_ns: int) -> list[Out]:
@@ -218,31 +231,42 @@ class Ros2Encoder:
         keep = rows >= 0
         disp = d.displacement_mm[keep] / 1000.0
         now = geom.points[rows[keep]] + disp
-        msg = _cloud(d.t_ns, self.thing, ("x", "y", "z", "dx", "dy", "dz"),
-                     [now[:, 0], now[:, 1], now[:, 2], disp[:, 0], disp[:, 1], disp[:, 2]], d.ids[keep])
+        msg = _cloud(d.t_ns, self.thing, ("x", "y", "z", "dx", "dy", "dz"), np.hstack([now, disp]),
+                     d.ids[keep])
         return [Out(ch, t_ns, msg)]
 
     def contacts(self, c: Contacts, t_ns: int) -> list[Out]:
+        """One ``ARROW`` per contact (id = its index), ending at the contact point along the force;
+        the arrows of contacts that ended (ids from the new count up) ``DELETE``d."""
         T, ch = _types(), self.channel("contacts")
         assert ch is not None
-        markers = [self._marker(t_ns, "contacts", 0, T.Marker.ARROW, T.Marker.DELETEALL)]
-        loc_m = c.locations_mm / 1000.0
-        for i, (loc, f) in enumerate(zip(loc_m.tolist(), c.forces_n.tolist(), strict=True)):
-            tail = np.array(loc) - np.array(f) * FORCE_M_PER_N
+        k = FORCE_M_PER_N
+        markers = []
+        pairs = zip((c.locations_mm / 1000.0).tolist(), c.forces_n.tolist(), strict=True)
+        for i, ((x, y, z), (fx, fy, fz)) in enumerate(pairs):
+            head = 0.25 * k * (fx * fx + fy * fy + fz * fz) ** 0.5
             markers.append(self._marker(
-                t_ns, "contacts", i, T.Marker.ARROW, T.Marker.ADD, color=(1.0, 0.55, 0.0, 1.0),
-                scale=(0.001, 0.0025, 0.25 * float(np.linalg.norm(f)) * FORCE_M_PER_N),
-                points=[T.Point(x=float(tail[0]), y=float(tail[1]), z=float(tail[2])),
-                        T.Point(x=loc[0], y=loc[1], z=loc[2])]))
+                t_ns, "contacts", i, T.Marker.ARROW, T.Marker.ADD, color=None, scale=(0.001, 0.0025, head),
+                points=[T.Point(x=x - fx * k, y=y - fy * k, z=z - fz * k), T.Point(x=x, y=y, z=z)]))
+        n = len(markers)
+        markers += [self._marker(t_ns, "contacts", i, T.Marker.ARROW, T.Marker.DELETE)
+                    for i in range(n, self._arrows)]
+        self._arrows = n
         return [Out(ch, t_ns, T.MarkerArray(markers=markers))]
 
     def wrench(self, c: Contacts, t_ns: int) -> list[Out]:
         """The net force on the skin and its torque about the frame's origin (sum of r x F)."""
         T, ch = _types(), self.channel("wrench")
         assert ch is not None
-        force = c.forces_n.sum(axis=0) if len(c.forces_n) else np.zeros(3)
-        torque = np.cross(c.locations_mm / 1000.0, c.forces_n).sum(axis=0) if len(c.forces_n) else np.zeros(3)
-        f, tq = force.tolist(), torque.tolist()
+        f, tq = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        pairs = zip((c.locations_mm / 1000.0).tolist(), c.forces_n.tolist(), strict=True)
+        for (x, y, z), (fx, fy, fz) in pairs:
+            f[0] += fx
+            f[1] += fy
+            f[2] += fz
+            tq[0] += y * fz - z * fy
+            tq[1] += z * fx - x * fz
+            tq[2] += x * fy - y * fx
         msg = T.WrenchStamped(header=_header(t_ns, self.thing), wrench=T.Wrench(
             force=T.Vector3(x=f[0], y=f[1], z=f[2]), torque=T.Vector3(x=tq[0], y=tq[1], z=tq[2])))
         return [Out(ch, t_ns, msg)]
