@@ -26,6 +26,7 @@ from wott_hub.network.config import (
     parse_directory,
     parse_discovery,
 )
+from wott_hub.robotics.config import FOXGLOVE_TABLE, FoxgloveConfig, parse_foxglove
 from wott_hub.security.config import SECURITY_TABLE, SecurityConfig, parse_security
 
 if TYPE_CHECKING:
@@ -105,6 +106,7 @@ class HubConfig:
     discovery: DiscoveryConfig = field(default_factory=DiscoveryConfig.off)  # [discovery]: files turn mDNS on
     mqtt: MqttConfig = field(default_factory=MqttConfig)  # [mqtt]: off unless url is set
     security: SecurityConfig = field(default_factory=SecurityConfig)  # [security]: docs/security.md
+    foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)  # [foxglove]: off unless port is set
     demo: bool = False  # no [[device]]: run the demo scene
     source: str = "<defaults>"
 
@@ -134,10 +136,10 @@ class HubConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<config>") -> HubConfig:
-        unknown = set(data) - {"hub", "device", "directory", "discovery", "mqtt", "security"}
+        unknown = set(data) - {"hub", "device", "directory", "discovery", "mqtt", "security", "foxglove"}
         if unknown:
             raise ConfigError(f"{source}: unknown table(s) {sorted(unknown)}; expected [hub], [[device]], "
-                              "[directory], [discovery], [mqtt] and [security]")
+                              "[directory], [discovery], [mqtt], [security] and [foxglove]")
         hub = data.get("hub", {})
         if isinstance(hub, dict) and hub.get("ws_port") is False:  # documented spelling of "off"
             hub = {**hub, "ws_port": None}
@@ -166,7 +168,8 @@ class HubConfig:
                    directory=parse_directory(data.get("directory", {}), source),
                    discovery=parse_discovery(data.get("discovery", {}), source),
                    mqtt=parse_mqtt(data.get("mqtt", {}), source),
-                   security=parse_security(data.get("security", {}), source), **values)
+                   security=parse_security(data.get("security", {}), source),
+                   foxglove=parse_foxglove(data.get("foxglove", {}), source), **values)
 
     @property
     def retention(self) -> Retention:
@@ -176,7 +179,7 @@ class HubConfig:
 
 
 HUB_TABLE = table_of(HubConfig, "hub", exclude=("devices", "directory", "discovery", "mqtt", "security",
-                                                "demo", "source"))
+                                                "foxglove", "demo", "source"))
 """The ``[hub]`` table as it is written in a file (JSON Schema: ``config_schema``)."""
 
 
@@ -203,7 +206,7 @@ def config_schema() -> dict[str, Any]:
     defs: dict[str, Any] = {}
     props: dict[str, Any] = {}
     for key, model in (("hub", HUB_TABLE), ("directory", DIRECTORY_TABLE), ("discovery", DISCOVERY_TABLE),
-                       ("mqtt", MQTT_TABLE), ("security", SECURITY_TABLE)):
+                       ("mqtt", MQTT_TABLE), ("security", SECURITY_TABLE), ("foxglove", FOXGLOVE_TABLE)):
         schema = json_schema(model)
         defs.update(schema.get("$defs", {}))
         props[key] = {"$ref": schema["$ref"]} if "$ref" in schema else schema

@@ -49,7 +49,7 @@ def _decoded(path, topic):
 
     out = []
     with open(path, "rb") as f:
-        for schema, ch, m in make_reader(f).iter_messages(topics=[topic]):
+        for schema, _, m in make_reader(f).iter_messages(topics=[topic]):
             pool = descriptor_pool.DescriptorPool()
             for fd in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
                 pool.Add(fd)

@@ -35,15 +35,16 @@ def recorded(writer):
         t = rs[-1].t_ns
         for k, (kind, name, value) in enumerate([
                 (KIND_EVENT, "actionDetection", "press"),
-                (KIND_EVENT, "actionDetails", {"action": "press", "confidence": 0.9,
-                                               "evidence": {"contacts": 1, "durationS": 0.4, "speedMmPerS": 1.5}}),
+                (KIND_EVENT, "actionDetails", {"action": "press", "confidence": 0.9, "evidence": {
+                    "contacts": 1, "durationS": 0.4, "speedMmPerS": 1.5}}),
                 (KIND_PROPERTY, "contactInformation", {"numOfContacts": 2, "contactLocations": [
                     {"x": 1.0, "y": 2.0, "z": 3.0}, {"x": -4.0, "y": 5.5, "z": 0.0}], "contactForces": [
                     {"x": 0.1, "y": 0.0, "z": -0.5}, {"x": 0.0, "y": -0.2, "z": -0.3}]}),
                 (KIND_PROPERTY, "contactInformation", {"numOfContacts": 0, "contactLocations": [],
                                                        "contactForces": []}),
                 (KIND_EVENT, "deviceAction", {"device": thing, "invokedAction": "tare"}),
-                (KIND_PROPERTY, "unavailableNodes", {"numOfUnavailableNodes": 1, "arrayOfUnavailableNodes": [3]})]):
+                (KIND_PROPERTY, "unavailableNodes", {"numOfUnavailableNodes": 1,
+                                                     "arrayOfUnavailableNodes": [3]})]):
             seq += 1
             rs.append(Record(thing, seq, kind, name, t + (k + 1) * 1_000_000, encode(value)))
         recs += rs

@@ -41,7 +41,8 @@ def export_bag(reader: HistoryReader, output: Path, devices: list[str], lo: int 
     if start > end or reader.first_time(devices, lo) is None:
         raise InvalidInput(f"no records of {', '.join(devices)} in that range: nothing to export")
     with Progress(TextColumn("rosbag2"), BarColumn(), TextColumn("{task.fields[records]:>10,} records"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True) as bar:
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True),
+                  transient=True) as bar:
         task = bar.add_task("export", total=max(1, end - start), records=0)
 
         def progress(records: int, t_ns: int) -> None:

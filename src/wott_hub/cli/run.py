@@ -36,6 +36,9 @@ def run(
     key: Path = typer.Option(None, "--key", exists=True, dir_okay=False, help="PEM private key of --cert."),
     insecure: bool = typer.Option(False, "--insecure",
                                   help="Serve everyone without credentials on a non-loopback address."),
+    foxglove_port: int = typer.Option(None, "--foxglove-port",
+                                      help="Serve Foxglove's WebSocket protocol on this port (0: any free; "
+                                           "[foxglove] port; docs/robotics.md)."),
 ) -> None:
     """Run the hub: one WoT servient for every device, SSE and WebSocket events, history.
 
@@ -51,6 +54,7 @@ def run(
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     # a ConfigError (or a HistoryError when the hub starts) is reported by ``cli.main``: one line
     check_port(port, "--port"), check_port(ws_port, "--ws-port")  # 70000 would wrap to 4464
+    check_port(foxglove_port, "--foxglove-port")
     cfg = HubConfig.load(config) if config else HubConfig.demo_config()
     changes: dict[str, Any] = {k: v for k, v in {"host": host, "http_port": port, "ws_port": ws_port,
                                  "database": database}.items() if v is not None}
@@ -62,6 +66,8 @@ def run(
         sec["insecure"] = True
     if sec:  # docs/security.md
         changes["security"] = dataclasses.replace(cfg.security, **sec)
+    if foxglove_port is not None:
+        changes["foxglove"] = dataclasses.replace(cfg.foxglove, port=foxglove_port)
     cfg = dataclasses.replace(cfg, **changes)  # checked again, as a file's values are
 
     from wott_hub.hub import serve
@@ -99,6 +105,8 @@ def _print(hub: Hub, info: dict[str, Any], cfg: HubConfig) -> None:
     if info["websocket"]:
         w(f"  WebSocket  {info['websocket']}/<id>   (wotpy JSON-RPC)")
     w(f"  hub Thing  {info['hub']}")
+    if info.get("foxglove"):
+        w(f"  Foxglove   {info['foxglove']}   (Foxglove: Open connection, Foxglove WebSocket)")
     if info.get("directory"):
         w(f"  directory  {info['directory']}things   (W3C WoT TDD: search/jsonpath, events)")
     w(f"  history    {info['database'] or 'off'}")
