@@ -32,7 +32,7 @@ def _config(tmp_path, press_scene, *, history: bool = True, **foxglove):
 
 async def _client(hub, wait_for) -> FoxClient:
     c = await FoxClient.connect(hub.describe()["foxglove"])
-    await wait_for(lambda: SKIN in c.channels and "/tf" in c.channels, what="the device's channels advertised")
+    await wait_for(lambda: SKIN in c.channels and "/tf" in c.channels, what="the channels advertised")
     return c
 
 
@@ -135,7 +135,8 @@ def test_mesh_and_frames_on_subscribe_and_the_latest_scene_always_drawn(tmp_path
             await wait_for(lambda: c.of("/tf") and c.of("/pad/scene/skin"), what="frames and mesh at once")
             tf = decode("foxglove.FrameTransforms", *_schema(c, "/tf", c.of("/tf")[0][1]))
             assert [(t.parent_frame_id, t.child_frame_id) for t in tf.transforms] == [("wott_hub", "pad")]
-            mesh = decode("foxglove.SceneUpdate", *_schema(c, "/pad/scene/skin", c.of("/pad/scene/skin")[0][1]))
+            first = c.of("/pad/scene/skin")[0][1]
+            mesh = decode("foxglove.SceneUpdate", *_schema(c, "/pad/scene/skin", first))
             assert mesh.entities[0].frame_id == "pad" and len(mesh.entities[0].triangles[0].indices) % 3 == 0
 
             def drawn():
@@ -144,10 +145,13 @@ def test_mesh_and_frames_on_subscribe_and_the_latest_scene_always_drawn(tmp_path
 
             # the press ends with a rest packet (intensity 0): at 5 scenes/s it arrives between two
             # slots, and is still drawn (an empty scene after a deformed one), by the timer
-            await wait_for(lambda: any(a and not b for a, b in zip(drawn(), drawn()[1:])), timeout=30,
-                           what="the rest state drawn after a press")
+            def rest_after_press() -> bool:
+                n = drawn()
+                return any(a and not b for a, b in zip(n, n[1:], strict=False))
+
+            await wait_for(rest_after_press, timeout=30, what="the rest state drawn after a press")
             times = [t for t, _ in c.of("/pad/scene/deformation")]
-            assert all(b - a >= 0.18e9 for a, b in zip(times, times[1:]))  # ~5 a second at most
+            assert all(b - a >= 0.18e9 for a, b in zip(times, times[1:], strict=False))  # 5 a second at most
             await c.close()
 
     run(main())
@@ -196,8 +200,8 @@ def test_bad_clients_change_nothing_for_the_others(tmp_path, press_scene, run, w
 
     got = [t for t, _ in good.of(SKIN)]
     engine = create_engine(database_url(tmp_path / "hub.db"))
-    recorded = [r.t_ns for page in HistoryReader(engine).pages("pad", got[0], got[-1], ["skinDeformedDetection"])
-                for r in page]
+    pages = HistoryReader(engine).pages("pad", got[0], got[-1], ["skinDeformedDetection"])
+    recorded = [r.t_ns for page in pages for r in page]
     engine.dispose()
     assert got == recorded
 

@@ -106,8 +106,7 @@ def export_rosbag2(reader: StorageReader, out_dir: Path, things: Sequence[str], 
                     if tf is not None:
                         emit([tf])
                     first = False
-                emit(fleet.raw(rec))
-                emit(fleet.things[rec.thing].record(rec))
+                emit(fleet.record(rec))
             summary.records += len(records)
             if progress is not None and records:
                 progress(summary.records, records[-1].t_ns)

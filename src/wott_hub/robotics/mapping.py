@@ -288,26 +288,28 @@ class FleetMapping:
         return ch
 
     def raw(self, rec: Record, wanted: Wanted = _all) -> list[Out]:
-        """A record as it is: Foxglove's raw JSON channel (every record); ROS 2's String topic (only
-        a record nothing else maps)."""
-        if self.profile == "ros2":
-            m = self.things.get(rec.thing)
-            if m is None or m.mapped(rec):
-                return []
-            from .ros2_msgs import ros_string
-
-            return [Out(self.raw_channel(rec.thing, rec.kind, rec.name), rec.t_ns, ros_string(rec.data))]
+        """A record as it is, on its raw channel: Foxglove's JSON (every record), ROS 2's
+        ``std_msgs/String`` (``record`` adds it only for a record nothing else carries)."""
         ch = self.raw_channel(rec.thing, rec.kind, rec.name)
         if not wanted(ch.topic):
             return []
+        if self.profile == "ros2":
+            from .ros2_msgs import ros_string
+
+            return [Out(ch, rec.t_ns, ros_string(rec.data))]
         return [Out(ch, rec.t_ns, rec.data.encode())]
 
     def record(self, rec: Record, wanted: Wanted = _all) -> list[Out]:
-        """Everything ``rec`` becomes: its raw form first, then its typed messages."""
+        """Everything ``rec`` becomes: in Foxglove its raw form and its typed messages; in ROS 2 its
+        typed messages, or its raw form when none carries it (not mapped, or unreadable)."""
         m = self.things.get(rec.thing)
         if m is None:
             return []
-        return self.raw(rec, wanted) + m.record(rec, wanted)
+        unreadable = m.unreadable
+        typed = m.record(rec, wanted)
+        if self.profile == "ros2" and m.mapped(rec) and m.unreadable == unreadable:
+            return typed
+        return self.raw(rec, wanted) + typed
 
     def due(self, now_ns: int) -> list[Out]:
         out: list[Out] = []
