@@ -273,12 +273,16 @@ class FoxgloveLive:
         at = min(self.mapping.deadlines(), default=None)
         if at is None:
             return
-        self._timer = self._loop.call_later(max(0.0, (at - time.time_ns()) / 1e9), self._flush)
+        # deadlines are in the records' time: a device whose clock is off by more than a slot is
+        # still drawn a slot later at most
+        self._timer_at = at
+        delay = min(1.0 / self.cfg.scene_hz, max(0.0, (at - time.time_ns()) / 1e9))
+        self._timer = self._loop.call_later(delay, self._flush)
 
     def _flush(self) -> None:
         self._timer = None
         try:
-            self._send(self.mapping.due(time.time_ns()))
+            self._send(self.mapping.due(max(time.time_ns(), self._timer_at)))
         except Exception:
             self.errors += 1
             log.exception("Foxglove: drawing a pending scene failed")
