@@ -37,6 +37,7 @@ from wott_hub.network.config import (
     parse_directory,
     parse_discovery,
 )
+from wott_hub.robotics.config import FOXGLOVE_TABLE, FoxgloveConfig, parse_foxglove
 from wott_hub.security.config import SECURITY_TABLE, SecurityConfig, parse_security
 
 if TYPE_CHECKING:
@@ -128,6 +129,7 @@ class HubConfig:
     discovery: DiscoveryConfig = field(default_factory=DiscoveryConfig.off)  # [discovery]: files turn mDNS on
     mqtt: MqttConfig = field(default_factory=MqttConfig)  # [mqtt]: off unless url is set
     security: SecurityConfig = field(default_factory=SecurityConfig)  # [security]: docs/security.md
+    foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)  # [foxglove]: off unless port is set
     demo: bool = False  # no [[device]]: run the demo scene
     source: str = "<defaults>"
 
@@ -168,7 +170,7 @@ class HubConfig:
         unknown = sorted(set(data) - set(_TABLES))
         for name in unknown:
             hint = suggest(name, ("device",), "[[{}]]") or suggest(name, _FILE_TABLES, "[{}]") or (
-                "; expected [hub], [[device]], [directory], [discovery], [mqtt] and [security]")
+                "; expected [hub], [[device]], [directory], [discovery], [mqtt], [security] and [foxglove]")
             errors.append(f"{source}: unknown table [{name}]{hint}")
         hub = data.get("hub", {})
         if isinstance(hub, dict) and hub.get("ws_port") is False:  # documented spelling of "off"
@@ -209,14 +211,15 @@ class HubConfig:
 
 
 HUB_TABLE = table_of(HubConfig, "hub", exclude=("devices", "directory", "discovery", "mqtt", "security",
-                                                "demo", "source"))
+                                                "foxglove", "demo", "source"))
 """The ``[hub]`` table as it is written in a file (JSON Schema: ``config_schema``)."""
 
-_FILE_TABLES = ("hub", "directory", "discovery", "mqtt", "security")
+_FILE_TABLES = ("hub", "directory", "discovery", "mqtt", "security", "foxglove")
 _TABLES: dict[str, tuple[Any, Any]] = {  # a file's tables: their declared model and their parser
     "hub": (None, None), "device": (None, None),
     "directory": (DIRECTORY_TABLE, parse_directory), "discovery": (DISCOVERY_TABLE, parse_discovery),
     "mqtt": (MQTT_TABLE, parse_mqtt), "security": (SECURITY_TABLE, parse_security),
+    "foxglove": (FOXGLOVE_TABLE, parse_foxglove),
 }
 
 
@@ -269,7 +272,7 @@ def config_schema() -> dict[str, Any]:
     defs: dict[str, Any] = {}
     props: dict[str, Any] = {}
     for key, model in (("hub", HUB_TABLE), ("directory", DIRECTORY_TABLE), ("discovery", DISCOVERY_TABLE),
-                       ("mqtt", MQTT_TABLE), ("security", SECURITY_TABLE)):
+                       ("mqtt", MQTT_TABLE), ("security", SECURITY_TABLE), ("foxglove", FOXGLOVE_TABLE)):
         schema = json_schema(model)
         defs.update(schema.get("$defs", {}))
         props[key] = {"$ref": schema["$ref"]} if "$ref" in schema else schema

@@ -1,5 +1,6 @@
 """MCAP export: every record comes back from the ``mcap`` reader exactly, on its channel, with its
-recorded time; Foxglove scene channels carry the mesh and the deformation."""
+recorded time; Foxglove's own messages (protobuf, decoded here by Google's runtime from the
+schemas in the file) carry the mesh, the deformation, the contacts, the actions and the frames."""
 
 from __future__ import annotations
 
@@ -42,13 +43,28 @@ def _read(path):
     return summary, msgs, meta
 
 
+def _decoded(path, topic):
+    """(log time, message) of ``topic``, decoded from the file's own protobuf schema."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    out = []
+    with open(path, "rb") as f:
+        for schema, _, m in make_reader(f).iter_messages(topics=[topic]):
+            pool = descriptor_pool.DescriptorPool()
+            for fd in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+                pool.Add(fd)
+            cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+            out.append((m.log_time, cls.FromString(m.data)))
+    return out
+
+
 def test_export_round_trips_every_record_on_its_channel(reader, two_devices, tmp_path):
     path = tmp_path / "out.mcap"
     with path.open("wb") as f:
         out = export_mcap(reader, f, ["pad-a", "pad-b"])
     assert out.records == len(two_devices)
     summary, msgs, meta = _read(path)
-    records = [m for m in msgs if "/scene/" not in m[0]]
+    records = [m for m in msgs if m[6] == "jsonschema"]
     expected = sorted(two_devices, key=lambda r: r.t_ns)  # one time base across the two devices
     assert [(m[0], m[1], m[2], m[3], m[4]) for m in records] == [
         (topic_of(r.thing, r.kind, r.name), r.t_ns, r.t_ns, r.seq, r.data.encode()) for r in expected]
@@ -66,26 +82,42 @@ def test_export_round_trips_every_record_on_its_channel(reader, two_devices, tmp
     assert KIND_NAMES[two_devices[1].kind] == "property"
 
 
-def test_scene_channels_hold_the_mesh_and_coloured_deformation(reader, two_devices, tmp_path):
+def test_foxglove_channels_hold_the_mesh_deformation_contacts_and_frames(reader, two_devices, tmp_path):
     path = tmp_path / "out.mcap"
     with path.open("wb") as f:
         out = export_mcap(reader, f, ["pad-a"], scene_hz=30.0)
     _, msgs, _ = _read(path)
-    mesh = [json.loads(m[4]) for m in msgs if m[0] == "/pad-a/scene/skin"]
-    deform = [(m[1], json.loads(m[4])) for m in msgs if m[0] == "/pad-a/scene/deformation"]
-    assert {m[5] for m in msgs if "/scene/" in m[0]} == {"foxglove.SceneUpdate"}
+    schemas = {m[0]: (m[5], m[6]) for m in msgs if m[6] != "jsonschema"}
+    assert schemas == {"/tf": ("foxglove.FrameTransforms", "protobuf"),
+                       "/pad-a/scene/skin": ("foxglove.SceneUpdate", "protobuf"),
+                       "/pad-a/scene/deformation": ("foxglove.SceneUpdate", "protobuf"),
+                       "/pad-a/scene/contacts": ("foxglove.SceneUpdate", "protobuf")}
+    (_, tf), = _decoded(path, "/tf")
+    assert [(t.parent_frame_id, t.child_frame_id, t.rotation.w) for t in tf.transforms] == [
+        ("wott_hub", "pad-a", 1.0)]
+    mesh = _decoded(path, "/pad-a/scene/skin")
     assert len(mesh) == 1  # 2.5 s of recording: the mesh once
-    tri = mesh[0]["entities"][0]["triangles"][0]
-    assert len(tri["points"]) == 256 and len(tri["indices"]) % 3 == 0 and max(tri["indices"]) < 256
+    tri = mesh[0][1].entities[0].triangles[0]
+    assert len(tri.points) == 256 and len(tri.indices) % 3 == 0 and max(tri.indices) < 256
+    deform = _decoded(path, "/pad-a/scene/deformation")
     # 300 packets at 120 Hz drawn at 30 Hz: about a quarter, the last packet always drawn
-    assert 70 <= len(deform) <= 80 and out.scene_messages == len(mesh) + len(deform)
+    assert 70 <= len(deform) <= 80
     skins = [r for r in two_devices if r.thing == "pad-a" and r.name == "skinDeformedDetection"]
-    assert deform[-1][0] == skins[-1].t_ns
-    ent = deform[0][1]["entities"][0]
-    assert ent["frame_id"] == "pad-a" and ent["id"] == "deformation"
-    t = ent["triangles"][0]
-    assert len(t["colors"]) == len(t["points"]) and len(t["indices"]) % 3 == 0
-    assert any(c["r"] > 0.5 for c in t["colors"])  # coloured by intensity (up to 3 mm here)
+    last = deform[-1][1].entities[0].timestamp
+    assert last.seconds * 10**9 + last.nanos == skins[-1].t_ns
+    ent = deform[0][1].entities[0]
+    assert ent.frame_id == "pad-a" and ent.id == "deformation"
+    t = ent.triangles[0]
+    assert len(t.colors) == len(t.points) and len(t.indices) % 3 == 0
+    assert any(c.r > 0.5 for c in t.colors)  # coloured by intensity (up to 3 mm here)
+    arrows = _decoded(path, "/pad-a/scene/contacts")
+    assert arrows and all(len(a.entities[0].arrows) == 1 for _, a in arrows)
+    a = arrows[0][1].entities[0].arrows[0]
+    # 0.25 N along -z, ending at the contact point (x = 0 mm, y = 1 mm): tail 5 mm above it
+    assert (round(a.pose.position.x, 6), round(a.pose.position.y, 6), round(a.pose.position.z, 6)) == (
+        0.0, 0.001, 0.005)
+    assert round(a.shaft_length + a.head_length, 6) == 0.005
+    assert out.scene_messages == len(msgs) - out.records
 
 
 def test_cli_exports_mcap_and_names_a_bad_format(engine, two_devices, tmp_path):
@@ -98,7 +130,7 @@ def test_cli_exports_mcap_and_names_a_bad_format(engine, two_devices, tmp_path):
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     _, msgs, _ = _read(path)
-    assert sum("/scene/" not in m[0] for m in msgs) == len(two_devices)
+    assert sum(m[6] == "jsonschema" for m in msgs) == len(two_devices)
     bad = subprocess.run([c if c != "mcap" else "csv" for c in cmd], capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode == 2 and "--format" in bad.stderr and "Traceback" not in bad.stderr

@@ -122,7 +122,7 @@ def test_the_client_lists_pages_and_exports_mcap(live, hub_td, tmp_path):
     assert size == path.stat().st_size > 0
     with path.open("rb") as f:
         msgs = [(ch.topic, m.log_time, m.data) for _, ch, m in make_reader(f).iter_messages()]
-    pad2 = [(t, d) for topic, t, d in msgs if topic.startswith("/pad2/") and "/scene/" not in topic]
+    pad2 = [(t, d) for topic, t, d in msgs if topic.startswith(("/pad2/events/", "/pad2/properties/"))]
     assert pad2 == [(r["t_ns"], json.dumps(r["data"], separators=(",", ":"), ensure_ascii=False).encode())
                     for r in everything]
     assert any(topic == "/pad/scene/deformation" for topic, *_ in msgs)

@@ -81,9 +81,9 @@ def export(
     t_to: str = typer.Option(None, "--to", help="End, same forms as --from."),
     name: list[str] = typer.Option(None, "--name", help="Only these affordances (repeatable)."),
     output: Path = typer.Option(None, "--output", "-o", help="File to write (default: standard output; "
-                                "required for mcap)."),
-    fmt: str = typer.Option("jsonl", "--format", help="jsonl (one record per line) or mcap (Foxglove, "
-                            "rosbag2; docs/history.md)."),
+                                "required for mcap), or the new folder of a rosbag2."),
+    fmt: str = typer.Option("jsonl", "--format", help="jsonl (one record per line), mcap (Foxglove) or "
+                            "rosbag2 (ROS 2: `ros2 bag play DIR`; docs/robotics.md)."),
     scene: bool = typer.Option(True, "--scene/--no-scene", help="mcap: Foxglove scene channels (mesh, "
                                "deformation)."),
     scene_hz: float = typer.Option(30.0, "--scene-hz", help="mcap: deformation scenes per second at most."),
@@ -110,10 +110,10 @@ def _export(devices: list[str] | str, t_from: str | None, t_to: str | None, name
     from ._progress import Bar, Tracked, wanted
 
     devices = [devices] if isinstance(devices, str) else list(devices)
-    if fmt not in ("jsonl", "mcap"):
-        raise InvalidInput(f"--format {fmt!r}: expected jsonl or mcap")
-    if fmt == "mcap" and output is None:
-        raise InvalidInput("--output is required with --format mcap (a binary file, not for a terminal)")
+    if fmt not in ("jsonl", "mcap", "rosbag2"):
+        raise InvalidInput(f"--format {fmt!r}: expected jsonl, mcap or rosbag2")
+    if fmt in ("mcap", "rosbag2") and output is None:
+        raise InvalidInput(f"--output is required with --format {fmt} (binary, not for a terminal)")
     if not (math.isfinite(scene_hz) and scene_hz > 0):
         raise InvalidInput(f"--scene-hz must be a number > 0, got {scene_hz}")
     lo, hi = time_range(t_from, t_to)
@@ -123,6 +123,11 @@ def _export(devices: list[str] | str, t_from: str | None, t_to: str | None, name
     for device in devices:
         if not reader.recorded(device):
             raise NotFound(f"no recorded device {device!r} (see `wott-hub history list`)")
+    if fmt == "rosbag2":
+        from ._robotics import export_bag
+
+        assert output is not None
+        return export_bag(reader, output, devices, lo, hi, name or None)
     spans = Tracked.spans(reader, devices, lo, hi)
     with Bar(f"export {', '.join(devices)}", Tracked.total(spans), wanted(progress)) as bar:
         tracked: Any = Tracked(reader, spans, bar)

@@ -58,6 +58,9 @@ def run(
     key: Path = typer.Option(None, "--key", exists=True, dir_okay=False, help="PEM private key of --cert."),
     insecure: bool = typer.Option(False, "--insecure",
                                   help="Serve everyone without credentials on a non-loopback address."),
+    foxglove_port: int = typer.Option(None, "--foxglove-port",
+                                      help="Serve Foxglove's WebSocket protocol on this port (0: any free; "
+                                           "[foxglove] port; docs/robotics.md)."),
 ) -> None:
     """Run the hub: one WoT servient for every device, SSE and WebSocket events, history.
 
@@ -78,6 +81,7 @@ def run(
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     # a ConfigError (or a HistoryError when the hub starts) is reported by ``cli``: one line each
     check_port(port, "--port"), check_port(ws_port, "--ws-port")  # 70000 would wrap to 4464
+    check_port(foxglove_port, "--foxglove-port")
     if config is not None:
         cfg, _, problems = load_checked(config)
         if cfg.demo:  # no [[device]]: the plugins' demo devices, whose mistakes mark them, not the hub
@@ -96,6 +100,8 @@ def run(
         sec["insecure"] = True
     if sec:  # docs/security.md
         changes["security"] = dataclasses.replace(cfg.security, **sec)
+    if foxglove_port is not None:
+        changes["foxglove"] = dataclasses.replace(cfg.foxglove, port=foxglove_port)
     cfg = dataclasses.replace(cfg, **changes)  # checked again, as a file's values are
     if sec and (problems := check_files(cfg)):
         raise ConfigError("\n".join(problems))
@@ -146,6 +152,8 @@ def banner(hub: Hub, info: dict[str, Any], cfg: HubConfig) -> list[str]:
     if info["websocket"]:
         lines.append(f"  WebSocket  {info['websocket']}/<id>   (wotpy JSON-RPC)")
     lines.append(f"  hub Thing  {info['hub']}")
+    if info.get("foxglove"):
+        lines.append(f"  Foxglove   {info['foxglove']}   (Foxglove: Open connection, Foxglove WebSocket)")
     if info.get("directory"):
         lines.append(f"  directory  {info['directory']}things   (W3C WoT TDD: search, events)")
     if info["database"]:

@@ -33,6 +33,7 @@ from wott_hub.config import HubConfig
 from wott_hub.errors import InvalidInput, NotFound
 from wott_hub.events.plane import EventPlane
 from wott_hub.network import HubNetwork
+from wott_hub.robotics.config import check_bind as check_foxglove_bind
 from wott_hub.security import AuditLog, build_policy
 from wott_hub.security.tls import server_context
 from wott_hub.servient import HUB_THING_ID, HubServer, ServedThing, hub_td
@@ -53,6 +54,7 @@ if TYPE_CHECKING:
     from wott_hub.events.subscriber import Subscriber
     from wott_hub.mqtt.publisher import MqttPublisher
     from wott_hub.plugins.model import DeviceConfig
+    from wott_hub.robotics.live import FoxgloveLive
 
 __all__ = ["Hub"]
 
@@ -65,6 +67,7 @@ class Hub:
                                 durability=cfg.history_durability)
         # who may do what, TLS (wott_hub.security): a ConfigError here refuses an open non-loopback hub
         self._policy = build_policy(cfg.security, cfg.host)
+        check_foxglove_bind(cfg.foxglove, cfg.security.insecure)  # [foxglove] off loopback: only if told
         self._audit = AuditLog()
         self._server = HubServer(self._plane, host=cfg.host, http_port=cfg.http_port, ws_port=cfg.ws_port,
                                 public_host=cfg.public_host, catalogue_port=cfg.catalogue_port,
@@ -85,6 +88,7 @@ class Hub:
         self._network = HubNetwork(NetworkPort(cfg, self._server, self._history, self._fleet, self._identity),
                                   cfg.directory, cfg.discovery)
         self._mqtt: MqttPublisher | None = None  # [mqtt]: made when the ports are bound
+        self._foxglove: FoxgloveLive | None = None  # [foxglove]: the live endpoint (robotics/live.py)
 
     @property
     def hub_id(self) -> str:
@@ -101,6 +105,8 @@ class Hub:
         self._server.bind()
         if self.config.mqtt.enabled:
             self._start_mqtt()
+        if self.config.foxglove.enabled:
+            self._start_foxglove()
         td = hub_td(self.config.name, self._server.layout)
         td["id"] = self._identity.hub_thing_id
         self._replay.install(td)  # the replay/stopReplay actions (replay.py)
@@ -134,6 +140,8 @@ class Hub:
         await self._fleet.stop()
         if self._mqtt is not None:
             await self._mqtt.stop()
+        if self._foxglove is not None:
+            self._foxglove.stop()
         await self._server.stop()
         await asyncio.to_thread(self._audit.close)
         await self._history.close()
@@ -163,6 +171,22 @@ class Hub:
             self._status.mqtt = self._mqtt
         self._mqtt.layout = layout
         self._mqtt.start()
+
+    def _start_foxglove(self) -> None:
+        """The live Foxglove endpoint: every served Thing's channels, fed by taps (wott_hub.robotics)."""
+        from wott_hub.robotics.live import FoxgloveLive
+
+        sec = self.config.security
+        tls = None
+        if sec.cert and sec.key:
+            from pathlib import Path
+
+            tls = (Path(sec.cert).read_bytes(), Path(sec.key).read_bytes())
+        if self._foxglove is None:
+            self._foxglove = FoxgloveLive(self.config.foxglove, self._plane, name=self.config.name, tls=tls)
+            self._server.on_expose.append(self._foxglove.exposed)
+            self._server.on_remove.append(self._foxglove.removed)
+        self._foxglove.start()
 
     async def __aenter__(self) -> Hub:
         await self.start()
@@ -301,5 +325,6 @@ class Hub:
             "failed": dict(self._fleet.failed),
             "database": str(self._history.engine.url) if self._history.engine is not None else None,
             "mqtt": self._mqtt.health()["broker"] if self._mqtt is not None else None,
+            "foxglove": self._foxglove.url if self._foxglove is not None else None,
             **self._network.describe(),
         }

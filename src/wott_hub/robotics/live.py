@@ -1,0 +1,293 @@
+"""The live Foxglove endpoint: the Foxglove WebSocket protocol, served by ``foxglove-sdk``.
+
+Contract (docs/robotics.md):
+- the same channels, schemas and bytes as the MCAP export (``mapping``, profile ``foxglove``):
+  each served Thing's raw channels (its events and observable properties, JSON, the TD's
+  schemas) and, for a skin, its mesh, deformation and contact scenes and its log; ``/tf`` places
+  every skin's frame. Channels are advertised when a Thing is served and removed with it;
+- nothing is built for nobody: a Thing's tap on the event plane (``EventPlane.add_tap``) is active
+  only while a client subscribes to one of its channels, and only the subscribed channels'
+  messages are made. The mesh and ``/tf`` are sent when a client subscribes to them (the protocol
+  has no latching), and the mesh again every ``MESH_EVERY_S``;
+- scenes at most ``scene_hz`` per device, the latest state drawn when its slot comes (a timer on
+  the hub's loop); raw channels carry every record, as the hub published it;
+- the hub is never slowed or stopped by a client: the SDK runs the sockets in its own threads,
+  each client has its own queue (``backlog`` messages; a slow client loses its oldest, alone);
+  a client's bad request (garbage, an unknown channel) gets an error status from the SDK and
+  changes nothing for the others; a mapping error is logged and counted, never raised into the
+  plane's publish.
+
+The SDK speaks the protocol under its current name, subprotocol ``foxglove.sdk.v1`` (the
+``foxglove.websocket.v1`` messages, renamed): Foxglove and ``@foxglove/ws-protocol``'s client
+(given a socket offering it) connect; a client offering only ``foxglove.websocket.v1`` is refused
+at the handshake (docs/robotics.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
+
+import foxglove
+from foxglove.websocket import ChannelView, Client, ServerListener
+
+from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
+
+from .channel import Channel, Out
+from .mapping import CONTACTS, LOG_EVENTS, FleetMapping
+from .names import TF_TOPIC
+from .raw_signals import DISPLACEMENT_EVENT, ImageFrame, TaxelGrid
+
+if TYPE_CHECKING:
+    from wott_hub.events.plane import EventPlane
+    from wott_hub.servient import ServedThing
+
+    from .config import FoxgloveConfig
+
+__all__ = ["FoxgloveLive"]
+
+log = logging.getLogger("wott_hub.foxglove")
+
+
+class _Listener(ServerListener):
+    """The SDK's callbacks (its threads): handed to the hub's loop, where the state lives."""
+
+    def __init__(self, live: FoxgloveLive) -> None:
+        self.live = live
+
+    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
+        self.live.call_soon(self.live.subscribed, channel.topic, 1)
+
+    def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
+        self.live.call_soon(self.live.subscribed, channel.topic, -1)
+
+
+class _Tap:
+    """One Thing's tap on the event plane: active while a client subscribes to one of its channels."""
+
+    __slots__ = ("live", "thing")
+
+    def __init__(self, live: FoxgloveLive, thing: str) -> None:
+        self.live = live
+        self.thing = thing
+
+    @property
+    def active(self) -> bool:
+        return self.live.active.get(self.thing, 0) > 0
+
+    def __call__(self, rec: Record) -> None:
+        self.live.record(rec)
+
+
+class FoxgloveLive:
+    def __init__(self, cfg: FoxgloveConfig, plane: EventPlane, *, name: str = "wott-hub",
+                 tls: tuple[bytes, bytes] | None = None) -> None:
+        self.cfg = cfg
+        self.plane = plane
+        self.name = name
+        self.tls = tls
+        self.mapping = FleetMapping("foxglove", scene_hz=cfg.scene_hz, color_max_mm=cfg.color_max_mm)
+        self.context: foxglove.Context | None = None
+        self.server: Any = None
+        self.channels: dict[str, foxglove.Channel] = {}  # topic -> the SDK's channel
+        self.owner: dict[str, str] = {}  # topic -> its Thing ("" for /tf)
+        self.subscribers: dict[str, int] = {}  # topic -> clients subscribed
+        self.active: dict[str, int] = {}  # Thing -> subscriptions to its channels
+        self.sent = 0
+        self.errors = 0
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at = 0
+
+    # --- lifecycle ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Bind and serve (the port is known after this: ``port``)."""
+        self._loop = asyncio.get_running_loop()
+        self.context = foxglove.Context()
+        cert, key = self.tls if self.tls is not None else (None, None)
+        self.server = foxglove.start_server(
+            name=self.name, host=self.cfg.host, port=self.cfg.port, context=self.context,
+            server_listener=_Listener(self), capabilities=[],
+            message_backlog_size=self.cfg.backlog, tls_cert=cert, tls_key=key)
+        self._channel(self._tf_channel(), "")
+
+    def stop(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        for ch in self.channels.values():
+            ch.close()
+        self.channels.clear()
+        self.owner.clear()
+
+    @property
+    def port(self) -> int | None:
+        return None if self.server is None else int(self.server.port)
+
+    @property
+    def url(self) -> str | None:
+        if self.port is None:
+            return None
+        host = self.cfg.host if self.cfg.host not in ("0.0.0.0", "::") else "127.0.0.1"
+        return f"{'wss' if self.tls else 'ws'}://{host}:{self.port}"
+
+    def call_soon(self, fn: Any, *args: Any) -> None:
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(fn, *args)
+
+    # --- following the served Things ------------------------------------------------------------
+
+    def exposed(self, served: ServedThing) -> None:
+        """Map a newly served Thing, advertise its channels, tap its records."""
+        import json
+
+        static = {}
+        for prop in ("skinNodes", "skinCells", "sensorCoordinateFrame"):
+            text = served.static.get(prop)
+            if text is not None:
+                static[prop] = json.loads(text)
+        m = self.mapping.add(served.id, served.td, static)
+        for ch in self._channels_of(served, m.enc):
+            self._channel(ch, served.id)
+        self.plane.add_tap(served.id, _Tap(self, served.id))
+        if m.geom is not None and self.subscribers.get(TF_TOPIC):
+            self._send_transforms()
+
+    def removed(self, served: ServedThing) -> None:
+        self.mapping.remove(served.id)
+        for topic in [t for t, owner in self.owner.items() if owner == served.id]:
+            self.channels.pop(topic).close()
+            del self.owner[topic]
+            self.subscribers.pop(topic, None)
+        self.active.pop(served.id, None)
+
+    def _channels_of(self, served: ServedThing, enc: Any) -> Iterable[Channel]:
+        td = served.td
+        events = td.get("events") or {}
+        props = td.get("properties") or {}
+        for name in events:
+            yield self.mapping.raw_channel(served.id, KIND_EVENT, name)
+        for name, aff in props.items():
+            if isinstance(aff, dict) and aff.get("observable"):
+                yield self.mapping.raw_channel(served.id, KIND_PROPERTY, name)
+        kinds = []
+        if enc.geom is not None:
+            kinds += ["mesh", "deformation"]
+            if DISPLACEMENT_EVENT in events:
+                kinds.append("displacement")
+        if CONTACTS in props:
+            kinds.append("contacts")
+        if any(n in events for n in LOG_EVENTS):
+            kinds.append("log")
+        for kind in kinds:
+            ch = enc.channel(kind)
+            if ch is not None:
+                yield ch
+
+    def _tf_channel(self) -> Channel:
+        from .foxglove_msgs import FoxgloveEncoder
+
+        return FoxgloveEncoder.tf_channel()
+
+    def _channel(self, ch: Channel, owner: str) -> foxglove.Channel:
+        found = self.channels.get(ch.topic)
+        if found is None:
+            schema = foxglove.Schema(name=ch.schema_name, encoding=ch.schema_encoding, data=ch.schema)
+            found = self.channels[ch.topic] = foxglove.Channel(
+                ch.topic, schema=schema, message_encoding=ch.encoding, context=self.context,
+                metadata=dict(ch.metadata))
+            self.owner[ch.topic] = owner
+        return found
+
+    # --- subscriptions (on the hub's loop) ------------------------------------------------------
+
+    def subscribed(self, topic: str, change: int) -> None:
+        owner = self.owner.get(topic)
+        if owner is None:
+            return
+        n = self.subscribers[topic] = max(0, self.subscribers.get(topic, 0) + change)
+        if owner:
+            self.active[owner] = max(0, self.active.get(owner, 0) + change)
+        if change > 0 and n:
+            if topic == TF_TOPIC:
+                self._send_transforms()
+            else:
+                m = self.mapping.things.get(owner)
+                mesh = m.enc.channel("mesh") if m is not None else None
+                if m is not None and mesh is not None and mesh.topic == topic:
+                    self._send(m.mesh(time.time_ns()))
+
+    def wanted(self, topic: str) -> bool:
+        return self.subscribers.get(topic, 0) > 0
+
+    # --- sending --------------------------------------------------------------------------------
+
+    def _send(self, outs: list[Out]) -> None:
+        for o in outs:
+            ch = self.channels.get(o.channel.topic)
+            if ch is None:  # a channel first met now (a camera's): advertised from now on
+                ch = self._channel(o.channel, dict(o.channel.metadata).get("thing", ""))
+                continue  # nobody can be subscribed to it yet
+            ch.log(o.payload, log_time=o.t_ns)
+            self.sent += 1
+
+    def _send_transforms(self) -> None:
+        tf = self.mapping.transforms(time.time_ns())
+        if tf is not None:
+            self._send([tf])
+
+    def record(self, rec: Record) -> None:
+        """The tap: what the subscribed channels need of ``rec``, sent; a pending scene timed."""
+        try:
+            self._send(self.mapping.record(rec, self.wanted))
+        except Exception:  # never into the plane's publish: the device's pipeline goes on
+            self.errors += 1
+            if self.errors == 1 or self.errors % 1000 == 0:
+                log.exception("Foxglove: mapping a record of %s failed (%d so far)", rec.thing, self.errors)
+            return
+        self._arm()
+
+    def image(self, thing: str, img: ImageFrame) -> None:
+        """A camera image of ``thing`` (issue 29's raw signal) to the clients subscribed to its camera."""
+        m = self.mapping.things.get(thing)
+        if m is not None:
+            self._send(m.image(img))
+
+    def taxels(self, thing: str, grid: TaxelGrid) -> None:
+        m = self.mapping.things.get(thing)
+        if m is not None:
+            self._send(m.taxels(grid))
+
+    def _arm(self) -> None:
+        """A timer at the earliest pending scene's slot (none while one is set)."""
+        if self._timer is not None or self._loop is None:
+            return
+        at = min(self.mapping.deadlines(), default=None)
+        if at is None:
+            return
+        # deadlines are in the records' time: a device whose clock is off by more than a slot is
+        # still drawn a slot later at most
+        self._timer_at = at
+        delay = min(1.0 / self.cfg.scene_hz, max(0.0, (at - time.time_ns()) / 1e9))
+        self._timer = self._loop.call_later(delay, self._flush)
+
+    def _flush(self) -> None:
+        self._timer = None
+        try:
+            self._send(self.mapping.due(max(time.time_ns(), self._timer_at)))
+        except Exception:
+            self.errors += 1
+            log.exception("Foxglove: drawing a pending scene failed")
+        self._arm()
+
+    def health(self) -> dict[str, Any]:
+        return {"url": self.url, "channels": len(self.channels),
+                "subscriptions": sum(self.subscribers.values()), "sent": self.sent, "errors": self.errors}
