@@ -98,11 +98,16 @@ def _writer(hub):
     return hub._history.writer
 
 
+def _checked(hub) -> None:
+    """Wait for the writer's start-up integrity check to have said what it found."""
+    deadline = time.monotonic() + 20
+    while _writer(hub).health()["integrity"] == "unchecked" and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
 def test_an_sse_resume_needing_corrupted_history_is_refused_with_503(hub_on):
     h = hub_on()
-    deadline = time.monotonic() + 20
-    while _writer(h.hub).health()["integrity"] == "unchecked" and time.monotonic() < deadline:
-        time.sleep(0.05)
+    _checked(h.hub)
     assert _writer(h.hub).health()["state"] == "degraded"
     url = h.hub.td_url("d") + "/events"
     with httpx.Client(timeout=10) as c:
@@ -114,7 +119,9 @@ def test_an_sse_resume_needing_corrupted_history_is_refused_with_503(hub_on):
 
 def test_a_read_error_during_a_resume_ends_the_stream_with_an_error_not_in_silence(hub_on):
     h = hub_on()
-    # as if the start-up check had not (yet) seen it: the read itself must say so
+    # as if the start-up check had not seen it: the read itself must say so. Its verdict is
+    # overwritten once it is in (written after this line, it would refuse the resume with a 503)
+    _checked(h.hub)
     state_of(_writer(h.hub).storage.engine).integrity = "ok"
     url = h.hub.td_url("d") + "/events"
     with httpx.Client(timeout=10) as c, c.stream(

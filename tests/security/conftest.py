@@ -29,10 +29,33 @@ def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
     return subprocess.run(["ip", *args], capture_output=True, text=True, check=check)
 
 
-@pytest.fixture(scope="package")
+def _remove_stale() -> None:
+    """Namespaces of a test run that was killed before its clean-up: their host end holds HOST_IP,
+    and the kernel would route this run's packets to it (every request from the namespace fails)."""
+    for line in _ip("netns", "list", check=False).stdout.splitlines():
+        name = line.split()[0] if line.strip() else ""
+        if name.startswith("wottsec") and name[7:].isdigit() and not _alive(int(name[7:])):
+            _ip("link", "del", f"wsh{name[7:]}", check=False)
+            _ip("netns", "del", name, check=False)
+
+
+def _alive(tag: int) -> bool:
+    """Whether a process whose pid ends in ``tag`` (the pid modulo 100,000) still runs pytest."""
+    for pid in (p for p in os.listdir("/proc") if p.isdigit() and int(p) % 100000 == tag):
+        try:
+            if b"pytest" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                return True
+        except OSError:
+            continue
+    return False
+
+
+@pytest.fixture(scope="session")
 def netns():
-    """(namespace name, the host end's address). Fails, never skips, without iproute2 or root."""
+    """(namespace name, the host end's address). Fails, never skips, without iproute2 or root.
+    Session-scoped: made once however a shuffled order interleaves this package with others."""
     assert shutil.which("ip"), "iproute2 is needed (apt-get install iproute2)"
+    _remove_stale()
     tag = f"{os.getpid() % 100000}"
     ns, host_if, ns_if = f"wottsec{tag}", f"wsh{tag}", f"wsn{tag}"
     _ip("netns", "add", ns)
