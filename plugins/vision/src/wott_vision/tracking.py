@@ -16,6 +16,21 @@ with the median motion of its tracked neighbours, and it is also searched for
 at its reference position, so it is found again where it reappears, mid-press
 or after release. ``estimate`` holds that best guess for every marker.
 
+That search at the reference is only for a marker *back home*: a detection within
+``home_fraction`` of its spacing of its rest position (a quarter: closer to its own
+home than to any other marker's). With the whole gate, a marker lost in a deep
+pinch took its compressed neighbour's dot there, which was then given away no more.
+
+And a frame that shows the grid at rest re-acquires it: when every detection lies
+within ``home_fraction`` of a spacing of one marker's rest position, one per marker,
+and they cover at least ``rest_fraction`` of the markers, each marker takes the dot
+at its home, whatever it tracked before (a marker with no dot at home, one not seen
+or pressed beyond it, keeps its guess). Tracking history cannot be trusted more than
+that picture: two markers that swapped identities in a pinch (a merged blob, a guess
+left behind while its neighbours moved apart) would otherwise stay swapped after the
+release, and the model would read a dent in a skin at rest for as long as the device
+runs. A light press moves no dot that far, so it re-acquires the same identities.
+
 ``predict`` adds the marker's last velocity to its search position (helps fast
 slides at low fps). ``assignment="optimal"`` replaces the greedy claim by a
 minimum-cost matching (``scipy.optimize.linear_sum_assignment``); it is slower
@@ -48,6 +63,8 @@ class MarkerTracker:
         neighbours: int = 6,
         merge_ratio: float = 1.45,
         reference_area: np.ndarray | None = None,
+        home_fraction: float = 0.25,
+        rest_fraction: float = 0.9,
     ) -> None:
         ref = np.asarray(reference, dtype=np.float64)
         if ref.ndim != 2 or ref.shape[1] != 2 or len(ref) == 0:
@@ -60,6 +77,10 @@ class MarkerTracker:
             raise ValueError("need 0 < gate_fraction <= 1 and 0 < min_gate_px <= max_gate_px")
         if not 0 < ambiguity <= 1:
             raise ValueError(f"ambiguity must lie in (0, 1], got {ambiguity}")
+        if not 0 < home_fraction <= 0.5:  # beyond half a spacing, a dot is nearer another marker's home
+            raise ValueError(f"home_fraction must lie in (0, 0.5], got {home_fraction}")
+        if not 0 < rest_fraction <= 1:
+            raise ValueError(f"rest_fraction must lie in (0, 1], got {rest_fraction}")
         self.reference = ref
         self.predict = predict
         self.assignment = assignment
@@ -77,6 +98,10 @@ class MarkerTracker:
             spacing = np.full(1, max_gate_px / gate_fraction)
             self._neighbours = np.zeros((1, 0), dtype=np.int64)
         self.gate = np.clip(gate_fraction * spacing, min_gate_px, max_gate_px)
+        self.home = np.minimum(home_fraction * spacing, self.gate)  # "back home" radius per marker
+        self.rest_fraction = float(rest_fraction)
+        self._ref_tree = cKDTree(ref)
+        self.reacquired = 0  # frames in which the grid at rest was re-acquired (identities reset)
         self.reset()
 
     def reset(self) -> None:
@@ -105,16 +130,25 @@ class MarkerTracker:
         m = len(self.reference)
         out = np.full((m, 2), np.nan)
         if len(pts):
-            guess = self.last + self.velocity if self.predict else self.last
-            owner = self._match(pts, guess, np.ones(m, dtype=bool))
-            taken = np.zeros(len(pts), dtype=bool)
-            taken[owner[owner >= 0]] = True
-            retry = (owner < 0) & self.lost  # lost for a while: it may be back home
-            if retry.any() and not taken.all():
-                free = np.flatnonzero(~taken)
-                second = self._match(pts[free], self.reference, retry)
-                hit = second >= 0
-                owner[hit] = free[second[hit]]
+            owner = self._at_rest(pts)
+            if owner is None:
+                guess = self.last + self.velocity if self.predict else self.last
+                owner = self._match(pts, guess, np.ones(m, dtype=bool))
+                taken = np.zeros(len(pts), dtype=bool)
+                taken[owner[owner >= 0]] = True
+                retry = (owner < 0) & self.lost  # lost for a while: it may be back home
+                if retry.any() and not taken.all():
+                    free = np.flatnonzero(~taken)
+                    second = self._match(pts[free], self.reference, retry)
+                    hit = second >= 0
+                    owner[hit] = free[second[hit]]
+            else:
+                self.reacquired += 1
+                # a marker whose dot is not where it was tracked changed identity: no step this frame
+                seen = owner >= 0
+                jump = np.zeros(m, dtype=bool)
+                jump[seen] = np.linalg.norm(pts[owner[seen]] - self.last[seen], axis=1) > self.gate[seen]
+                self.lost |= jump
             found = owner >= 0
             if areas is not None:
                 a = np.asarray(areas, dtype=np.float64).reshape(-1)[valid]
@@ -141,15 +175,34 @@ class MarkerTracker:
         self.lost = ~found
         return out
 
-    def _match(self, pts: np.ndarray, guess: np.ndarray, active: np.ndarray) -> np.ndarray:
+    def _at_rest(self, pts: np.ndarray) -> np.ndarray | None:
+        """The rest assignment (index into ``pts`` per marker, -1: not seen) if ``pts`` show the grid
+        at rest (see the module doc), else None."""
+        m = len(self.reference)
+        if len(pts) < self.rest_fraction * m or len(pts) > m:
+            return None
+        dist, j = self._ref_tree.query(pts, k=1, distance_upper_bound=float(self.home.max()))
+        if not np.isfinite(dist).all():
+            return None
+        if (dist > self.home[j]).any():
+            return None
+        owner = np.full(m, -1, dtype=np.int64)
+        owner[j] = np.arange(len(pts))
+        if np.count_nonzero(owner >= 0) != len(pts):  # two dots at one home: not the grid at rest
+            return None
+        return owner
+
+    def _match(self, pts: np.ndarray, guess: np.ndarray, active: np.ndarray,
+               gate: np.ndarray | None = None) -> np.ndarray:
         """Index into ``pts`` for each marker (-1: none within its gate); one marker per point."""
         m = len(guess)
+        gate = self.gate if gate is None else gate
         owner = np.full(m, -1, dtype=np.int64)
         act = np.flatnonzero(active)
         if self.assignment == "optimal":
-            return self._match_optimal(pts, guess, act, owner)
-        dist, j = cKDTree(pts).query(guess[act], k=1, distance_upper_bound=float(self.gate.max()))
-        ok = np.isfinite(dist) & (dist <= self.gate[act])
+            return self._match_optimal(pts, guess, act, owner, gate)
+        dist, j = cKDTree(pts).query(guess[act], k=1, distance_upper_bound=float(gate.max()))
+        ok = np.isfinite(dist) & (dist <= gate[act])
         act, dist, j = act[ok], dist[ok], j[ok]
         order = np.lexsort((dist, j))  # by point, closest marker first
         act, dist, j = act[order], dist[order], j[order]
@@ -164,10 +217,10 @@ class MarkerTracker:
         return owner
 
     def _match_optimal(self, pts: np.ndarray, guess: np.ndarray, act: np.ndarray,
-                       owner: np.ndarray) -> np.ndarray:
+                       owner: np.ndarray, gate_all: np.ndarray) -> np.ndarray:
         from scipy.optimize import linear_sum_assignment
 
-        gate = self.gate[act]
+        gate = gate_all[act]
         d = np.linalg.norm(guess[act, None, :] - pts[None, :, :], axis=2)
         big = 1e6
         cost = np.where(d <= gate[:, None], d, big)
