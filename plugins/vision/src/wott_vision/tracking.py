@@ -14,12 +14,12 @@ markers goes to the closer only when it is clearly closer (``ambiguity``);
 otherwise to neither. A lost marker is not frozen: its search position moves
 with the median motion of its tracked neighbours, and it is also searched for
 at its reference position, so it is found again where it reappears, mid-press
-or after release. ``estimate`` holds that best guess for every marker.
-
-That search at the reference is only for a marker *back home*: a detection within
-``home_fraction`` of its spacing of its rest position (a quarter: closer to its own
-home than to any other marker's). With the whole gate, a marker lost in a deep
-pinch took its compressed neighbour's dot there, which was then given away no more.
+or after release. That second search takes only a detection no tracked guess
+reached: a dot two lost markers contested (both guesses in their gates, neither
+clearly closer) is one of the two, and giving it to one by its rest position
+swaps them (seen in a deep pinch on the barrel: two markers squeezed into one
+blob for half a second, then the one whose rest position lay nearer took its
+neighbour's dot). ``estimate`` holds that best guess for every marker.
 
 And a frame that shows the grid at rest re-acquires it: when every detection lies
 within ``home_fraction`` of a spacing of one marker's rest position, one per marker,
@@ -133,9 +133,8 @@ class MarkerTracker:
             owner = self._at_rest(pts)
             if owner is None:
                 guess = self.last + self.velocity if self.predict else self.last
-                owner = self._match(pts, guess, np.ones(m, dtype=bool))
-                taken = np.zeros(len(pts), dtype=bool)
-                taken[owner[owner >= 0]] = True
+                taken = np.zeros(len(pts), dtype=bool)  # claimed by a guess, given or contested
+                owner = self._match(pts, guess, np.ones(m, dtype=bool), taken)
                 retry = (owner < 0) & self.lost  # lost for a while: it may be back home
                 if retry.any() and not taken.all():
                     free = np.flatnonzero(~taken)
@@ -193,16 +192,20 @@ class MarkerTracker:
         return owner
 
     def _match(self, pts: np.ndarray, guess: np.ndarray, active: np.ndarray,
-               gate: np.ndarray | None = None) -> np.ndarray:
-        """Index into ``pts`` for each marker (-1: none within its gate); one marker per point."""
+               claimed: np.ndarray | None = None) -> np.ndarray:
+        """Index into ``pts`` for each marker (-1: none within its gate); one marker per point.
+
+        ``claimed`` (K,) bool, if given, is set for every point some marker's guess reached,
+        whether it won the point or the point was contested."""
         m = len(guess)
-        gate = self.gate if gate is None else gate
         owner = np.full(m, -1, dtype=np.int64)
         act = np.flatnonzero(active)
         if self.assignment == "optimal":
-            return self._match_optimal(pts, guess, act, owner, gate)
-        dist, j = cKDTree(pts).query(guess[act], k=1, distance_upper_bound=float(gate.max()))
-        ok = np.isfinite(dist) & (dist <= gate[act])
+            return self._match_optimal(pts, guess, act, owner, claimed)
+        dist, j = cKDTree(pts).query(guess[act], k=1, distance_upper_bound=float(self.gate.max()))
+        ok = np.isfinite(dist) & (dist <= self.gate[act])
+        if claimed is not None:
+            claimed[j[ok]] = True
         act, dist, j = act[ok], dist[ok], j[ok]
         order = np.lexsort((dist, j))  # by point, closest marker first
         act, dist, j = act[order], dist[order], j[order]
@@ -217,11 +220,13 @@ class MarkerTracker:
         return owner
 
     def _match_optimal(self, pts: np.ndarray, guess: np.ndarray, act: np.ndarray,
-                       owner: np.ndarray, gate_all: np.ndarray) -> np.ndarray:
+                       owner: np.ndarray, claimed: np.ndarray | None) -> np.ndarray:
         from scipy.optimize import linear_sum_assignment
 
-        gate = gate_all[act]
+        gate = self.gate[act]
         d = np.linalg.norm(guess[act, None, :] - pts[None, :, :], axis=2)
+        if claimed is not None:
+            claimed |= (d <= gate[:, None]).any(axis=0)
         big = 1e6
         cost = np.where(d <= gate[:, None], d, big)
         rows, cols = linear_sum_assignment(cost)
