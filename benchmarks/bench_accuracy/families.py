@@ -76,6 +76,7 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
 
 
 async def _frames(driver: Any, family: Family, scene: Scene) -> tuple[list[TactileFrame], list[float]]:
+    await driver.prepare()  # as the hub does after opening (the scene driver reads its file there)
     frames: list[TactileFrame] = []
     times: list[float] = []
     n_due = int(scene.duration_s * family.rate_hz) + 1

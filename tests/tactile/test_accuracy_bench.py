@@ -36,3 +36,31 @@ def test_the_bench_tells_peaks_from_connected_sets_on_two_close_presses(monkeypa
     assert sets["right"] == 0 and sets["spurious"] > 0  # one contact between the presses, matching neither
     assert peaks["reported"] == peaks["expected"] == 3 and peaks["static_slip"] == 0
     assert peaks["phantom"] == sets["phantom"] == 0
+
+
+def test_after_a_deep_pinch_on_the_camera_barrel_the_grid_is_back_and_nothing_touches_at_rest(monkeypatch):
+    """The held-out pinch on the camera-simulated barrel (issue 31): its markers squeeze into merged
+    blobs for half a second. Once released, every marker is tracked at its rest position again, no
+    contact is reported at rest, the release is reported, and no contact matches no finger."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import numpy as np
+    from bench_accuracy.cases import CASES
+    from bench_accuracy.families import FAMILIES, record
+    from bench_accuracy.score import score
+    from bench_accuracy.truth import frame_truths
+    from bench_accuracy.variants import DEFAULT, run
+
+    i, case = next((i, c) for i, c in enumerate(CASES["barrel"]) if c.name == "pinch B")
+    rec = record(FAMILIES["camera barrel"], case, i)
+    truths = frame_truths(rec)
+    after = [k for k, t in enumerate(truths) if t.rest and rec.scene_t[k] > 1.0]
+    assert len(after) >= 5  # rest frames after the release, all scored
+    kept, res, times, refused = run(rec, DEFAULT)
+    assert refused == 0
+    s = score(rec, [truths[k] for k in kept], res, times)
+    assert s.phantom == 0 and "release" in s.reported and s.false_actions == []
+    assert s.spurious <= 0.05 * s.frames
+    est = rec.driver.last_estimate  # the last frame: the skin at rest
+    for tracked, home in zip(est.tracked_px, rec.driver.estimator.reference_px, strict=True):
+        assert np.isfinite(tracked).all()
+        assert np.abs(tracked - home).max() < 1.0  # px: every marker on its own dot

@@ -41,6 +41,7 @@ def test_a_kelvin_voigt_press_below_epsilon_is_explained_in_the_health(tmp_path)
     pipeline.started()
 
     async def play():
+        await driver.prepare()  # as the hub does after opening: the scene driver reads its file there
         out = []
         async for frame in driver.frames():
             res = pipeline.processor.process(frame)

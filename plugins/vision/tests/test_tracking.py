@@ -111,3 +111,76 @@ def test_lost_markers_ride_along_with_their_neighbours():
         np.testing.assert_allclose(tr.estimate[0], ref[0] + k * shift)  # carried by its neighbours
     out = tr.track(ref + 4 * shift)  # it reappears 4 steps away from home: found at the carried guess
     np.testing.assert_allclose(out, ref + 4 * shift)
+
+
+def test_a_dot_two_lost_markers_contest_is_not_given_away_by_rest_position():
+    """The deep pinch on the barrel (issue 31): marker a is squeezed towards b's rest position while
+    both are lost; the dot that reappears between their guesses is a's, and b's search at its rest
+    position must not take it (that swap outlived the release: phantom contacts at rest)."""
+    ref = _grid()  # 20 px apart: gate 9 px
+    a, b = 1, 2  # (20, 0) and (40, 0)
+    tr = MarkerTracker(ref)
+    tr.track(ref)
+    frame = ref.copy()
+    frame[a] += [7.0, 0.0]
+    tr.track(np.delete(frame, b, axis=0))  # a seen pressed towards b, b hidden
+    tr.track(np.delete(ref, [a, b], axis=0))  # both hidden
+    np.testing.assert_allclose(tr.estimate[[a, b]], frame[[a, b]])  # a's guess 27, b's 40
+    frame[a] = [34.0, 0.0]  # a reappears 7 px from its guess, 6 px from b's (and from b's home)
+    out = tr.track(np.delete(frame, b, axis=0))
+    assert np.isnan(out[[a, b]]).all()  # contested: neither, and not b by its rest position
+    np.testing.assert_allclose(np.delete(out, [a, b], axis=0), np.delete(ref, [a, b], axis=0))
+
+
+def test_the_grid_at_rest_is_reacquired_whatever_was_tracked():
+    """Identities swapped (however: a merged blob, a guess left behind) heal as soon as the frame
+    shows the grid at rest; a press elsewhere is tracked, not re-acquired."""
+    ref = _grid()
+    tr = MarkerTracker(ref)
+    tr.track(ref)
+    tr.last[[1, 2]] = tr.last[[2, 1]]  # 1 and 2 hold each other's dots, as a pinch left them
+    assert tr.rest_frames == 1  # the first frame was one
+    rng = np.random.default_rng(1)
+    pressed = ref.copy()
+    pressed[30] += [7.0, 0.0]  # beyond a quarter spacing (5 px): not the grid at rest
+    out = tr.track(pressed)
+    assert tr.rest_frames == 1
+    np.testing.assert_allclose(out[[1, 2]], ref[[2, 1]])  # still swapped: tracking alone cannot tell
+    rest = ref + rng.normal(0, 0.3, ref.shape)
+    perm = rng.permutation(len(rest))
+    out = tr.track(rest[perm])
+    assert tr.rest_frames == 2
+    np.testing.assert_allclose(out, rest)
+    np.testing.assert_allclose(tr.track(ref), ref)  # and tracked on from there
+
+
+def test_reacquiring_keeps_the_guess_of_a_marker_not_seen():
+    ref = _grid()
+    tr = MarkerTracker(ref)
+    shift = np.array([4.0, 0.0])
+    tr.track(ref)
+    tr.track(np.delete(ref, 0, axis=0))  # marker 0 hidden (pressed out of sight)...
+    light = ref.copy()
+    light[0] += shift
+    seen = tr.rest_frames
+    out = tr.track(np.delete(light, 0, axis=0))  # ...the rest of the grid at home: re-acquired
+    assert tr.rest_frames == seen + 1 and np.isnan(out[0]).all()
+    np.testing.assert_allclose(out[1:], ref[1:])
+    out = tr.track(light)  # it reappears 4 px off home: within its gate, found
+    np.testing.assert_allclose(out, light)
+
+
+def test_two_dots_at_one_home_are_not_the_grid_at_rest():
+    ref = _grid()
+    tr = MarkerTracker(ref)
+    tr.track(ref)
+    frame = np.vstack([np.delete(ref, 3, axis=0), ref[4] + [1.0, 0.0]])  # 3 gone, a second dot at 4's home
+    tr.track(frame)
+    assert tr.rest_frames == 1  # the first frame only
+
+
+@pytest.mark.parametrize("kw", [{"home_fraction": 0.6}, {"home_fraction": 0.0}, {"rest_fraction": 0.0},
+                                {"rest_fraction": 1.5}])
+def test_bad_rest_settings(kw):
+    with pytest.raises(ValueError):
+        MarkerTracker(_grid(), **kw)

@@ -101,7 +101,7 @@ class MarkerTracker:
         self.home = np.minimum(home_fraction * spacing, self.gate)  # "back home" radius per marker
         self.rest_fraction = float(rest_fraction)
         self._ref_tree = cKDTree(ref)
-        self.reacquired = 0  # frames in which the grid at rest was re-acquired (identities reset)
+        self.rest_frames = 0  # frames that showed the grid at rest (identities taken from it)
         self.reset()
 
     def reset(self) -> None:
@@ -142,7 +142,7 @@ class MarkerTracker:
                     hit = second >= 0
                     owner[hit] = free[second[hit]]
             else:
-                self.reacquired += 1
+                self.rest_frames += 1
                 # a marker whose dot is not where it was tracked changed identity: no step this frame
                 seen = owner >= 0
                 jump = np.zeros(m, dtype=bool)
