@@ -55,7 +55,8 @@ setTimeout(() => {
 }, (seconds * 1000) / 2);
 
 setTimeout(() => {
-  console.log(JSON.stringify({ report: { serverInfo, topics, statuses, afterGarbage, protocol: ws.protocol } }));
+  const report = JSON.stringify({ report: { serverInfo, topics, statuses, afterGarbage, protocol: ws.protocol } });
   client.close();
-  process.exit(0);
+  // a pipe's writes are asynchronous in Node: exit once the whole line (~100 kB) is out, not before
+  process.stdout.write(report + "\n", () => process.exit(0));
 }, seconds * 1000);

@@ -234,4 +234,5 @@ report.hubActions.stopReplay = await outcome(async () => {
 
 say({report});
 await servient.shutdown();
-process.exit(0);
+// stdout to a pipe is asynchronous in Node: exit once everything written is out
+process.stdout.write("", () => process.exit(0));

@@ -230,4 +230,5 @@ if (mode === "matrix") {
   console.error("usage: nodewot_credentials.mjs matrix | hub <url> <token> <device> [seconds]");
   process.exit(1);
 }
-process.exit(0);
+// stdout to a pipe is asynchronous in Node: exit once everything written is out
+process.stdout.write("", () => process.exit(0));

@@ -133,4 +133,5 @@ for (const [name, td] of Object.entries(input.tds)) {
   n++;
 }
 process.stdout.write(JSON.stringify({done: n}) + "\n");
-process.exit(0);
+// stdout to a pipe is asynchronous in Node: exit once everything written is out
+process.stdout.write("", () => process.exit(0));
