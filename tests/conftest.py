@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import os
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -177,3 +180,37 @@ def _press_scene(device_id: str, shape: str = "flat", start_s: float = 0.1):
 def press_scene():
     """press_scene(device_id, shape="flat", start_s=0.1) -> DeviceConfig."""
     return _press_scene
+
+
+# --- the wott-hub command as a person runs it (tests/cli, tests/adversarial) ---------------------
+
+WOTT_HUB = str(Path(sys.executable).with_name("wott-hub"))
+
+
+def _cli(*args: str, cwd: Path | str | None = None, env: dict[str, str] | None = None,
+         input: str | None = None, timeout: float = 120,
+         columns: int = 80) -> subprocess.CompletedProcess[str]:
+    full_env = {**os.environ, "COLUMNS": str(columns), **(env or {})}
+    return subprocess.run([WOTT_HUB, *args], capture_output=True, text=True, timeout=timeout, cwd=cwd,
+                          env=full_env, input=input)
+
+
+@pytest.fixture(scope="session")
+def cli():
+    """``cli(*args, cwd=None, env=None, input=None, timeout=120, columns=80)`` -> CompletedProcess."""
+    return _cli
+
+
+def one_error(res: subprocess.CompletedProcess[str], code: int) -> str:
+    """The one ``error:`` line of a command that failed with ``code``, and no traceback."""
+    assert res.returncode == code, (res.returncode, res.stdout, res.stderr)
+    assert "Traceback" not in res.stderr + res.stdout, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), res.stderr
+    return lines[0]
+
+
+@pytest.fixture(scope="session")
+def one_error_line():
+    """``one_error_line(process, code)`` -> the single ``error: ...`` line it printed."""
+    return one_error

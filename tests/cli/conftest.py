@@ -1,8 +1,8 @@
 """The ``wott-hub`` command as a person runs it: a real process, output not a terminal, 80 columns.
 
-``cli(*args)`` runs the installed ``wott-hub`` with ``COLUMNS=80`` (what a pipe or a CI log gets)
-and returns the finished process. ``demo`` is a real ``wott-hub run`` with no config (the demo
-fleet, free ports, its database in a temporary folder), started once for the package and
+``cli(*args)`` (tests/conftest.py) runs the installed ``wott-hub`` with ``COLUMNS=80`` (what a pipe
+or a CI log gets) and returns the finished process. ``demo`` is a real ``wott-hub run`` with no
+config (the demo fleet, free ports, its database in a temporary folder), started once for the package and
 stopped with SIGINT; it yields what its banner printed, parsed: the URLs are read from the
 banner, so a banner that cuts or loses one fails every test that needs it.
 """
@@ -21,35 +21,6 @@ from pathlib import Path
 import pytest
 
 WOTT_HUB = str(Path(sys.executable).with_name("wott-hub"))
-
-
-def _cli(*args: str, cwd: Path | str | None = None, env: dict[str, str] | None = None,
-         input: str | None = None, timeout: float = 120,
-         columns: int = 80) -> subprocess.CompletedProcess[str]:
-    full_env = {**os.environ, "COLUMNS": str(columns), **(env or {})}
-    return subprocess.run([WOTT_HUB, *args], capture_output=True, text=True, timeout=timeout, cwd=cwd,
-                          env=full_env, input=input)
-
-
-@pytest.fixture(scope="session")
-def cli():
-    """``cli(*args, cwd=None, env=None, input=None, timeout=120, columns=80)`` -> CompletedProcess."""
-    return _cli
-
-
-def one_error(res: subprocess.CompletedProcess[str], code: int) -> str:
-    """The one ``error:`` line of a command that failed with ``code``, and no traceback."""
-    assert res.returncode == code, (res.returncode, res.stdout, res.stderr)
-    assert "Traceback" not in res.stderr + res.stdout, res.stderr
-    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: "), res.stderr
-    return lines[0]
-
-
-@pytest.fixture(scope="session")
-def one_error_line():
-    """``one_error_line(process, code)`` -> the single ``error: ...`` line it printed."""
-    return one_error
 
 
 @dataclass

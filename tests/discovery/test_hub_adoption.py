@@ -70,14 +70,23 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
         collector = None
         try:
             # another process browses while the device simulator starts in a third one
-            discover = await asyncio.create_subprocess_exec(
-                str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "2", "--json",
-                stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+            async def browse() -> dict[str, dict]:
+                discover = await asyncio.create_subprocess_exec(
+                    str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "2", "--json",
+                    stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+                out, err = await asyncio.wait_for(discover.communicate(), 60)
+                assert discover.returncode == 0, err.decode()
+                return {r["name"]: r for r in json.loads(out)}
+
+            names = {f"hub-under-test {hub.hub_id}", f"hub on hub-under-test {hub.hub_id}"}
+            browsing = asyncio.ensure_future(browse())
             sim = await device_sim("127.0.0.1", "skin-7", FOREIGN).start()
             sim_url = sim.base
-            out, err = await asyncio.wait_for(discover.communicate(), 60)
-            assert discover.returncode == 0, err.decode()
-            rows = {r["name"]: r for r in json.loads(out)}
+            rows = await browsing
+            for _ in range(4):  # again if a busy machine made it miss one of ours in its 2 s window
+                if names <= set(rows):
+                    break
+                rows = await browse()
             tdd = rows[f"hub-under-test {hub.hub_id}"]  # instance names carry the hub id
             assert tdd["type"] == "Directory" and tdd["td_type"] == "Directory"
             assert tdd["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": "http"}

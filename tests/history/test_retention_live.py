@@ -51,9 +51,9 @@ def test_old_and_excess_records_go_while_the_hub_writes_and_the_file_stops_growi
     ht = hub_thread(cfg).start()
     try:
         writer = ht.hub._history.writer
-        # the configured policy, checked every 0.3 s instead of every minute (the test's only change)
+        # the configured policy, checked every 0.1 s instead of every minute (the test's only change)
         assert writer.retention == Retention(days=1, max_mb=LIMIT_MB)
-        writer.retention = Retention(days=1, max_mb=LIMIT_MB, check_every_s=0.3)
+        writer.retention = Retention(days=1, max_mb=LIMIT_MB, check_every_s=0.1)
         writer._next_retention = 0.0
         engine = ht.hub._history.engine
 
