@@ -209,10 +209,10 @@ def test_a_remote_hub_whose_things_refuse_us_is_one_warning(browsing_hub, eventu
     caplog.set_level(logging.DEBUG, logger="wott_hub.discovery")
     announced = Announced()
     try:
-        origin = announced.refusing_hub(20)
+        origin = announced.refusing_hub(6)  # each announcement is probed for ~1 s: 6 make the point
         explorer = browsing_hub.hub._network.discovery.explorer
-        eventually(lambda: explorer.unreadable.get(origin, 0) >= 20, timeout=60,
-                   what=lambda: f"20 refusals from {origin}: {explorer.unreadable}")
+        eventually(lambda: explorer.unreadable.get(origin, 0) >= 6, timeout=60,
+                   what=lambda: f"6 refusals from {origin}: {explorer.unreadable}")
     finally:
         announced.close()
     about = [r for r in caplog.records if r.name == "wott_hub.discovery" and origin in r.getMessage()
@@ -220,4 +220,4 @@ def test_a_remote_hub_whose_things_refuse_us_is_one_warning(browsing_hub, eventu
     warnings = [r for r in about if r.levelno >= logging.WARNING]
     assert len(warnings) == 1, [r.getMessage() for r in warnings]
     assert origin in warnings[0].getMessage() and "401" in warnings[0].getMessage()
-    assert sum(1 for r in about if r.levelno == logging.DEBUG) >= 19  # the details, at debug
+    assert sum(1 for r in about if r.levelno == logging.DEBUG) >= 5  # the details, at debug

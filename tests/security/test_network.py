@@ -203,7 +203,8 @@ def test_every_td_declares_the_bearer_schemes_it_is_served_with(netns, hub, toke
         {"id": "listed", "method": "GET", "url": f"{http}/things", "token": tokens[1]["read"]}])
     tds = json.loads(got["all"]["body"])
     assert set(tds) >= {"hub", "pad"}
-    listed = json.loads(got["listed"]["body"])
+    # what this hub serves, not the TDs other tests of the module registered (a foreign TD keeps its own)
+    listed = [td for td in json.loads(got["listed"]["body"]) if not td["id"].startswith("urn:test:")]
     for td in [*tds.values(), *listed]:
         assert td["security"] == ["bearer_sc"], td["id"]
         assert td["securityDefinitions"]["bearer_sc"]["scheme"] == "bearer"
