@@ -1,9 +1,9 @@
 """What the tests of the hub's surroundings share (issue 33, part B): measuring what an attack did to
 another client, and the real parts they start.
 
-Loaded by path (``load()`` in each test module: with ``--import-mode=importlib`` test modules cannot
-import each other). Nothing here is a mock: ``GapMeter`` is a real SSE client in a thread,
-``Broker`` a real Mosquitto, ``HubProcess`` the real ``wott-hub run``.
+Imported by each test module as ``from . import surroundings as S``. Nothing here is a mock:
+``GapMeter`` is a real SSE client in a thread, ``Broker`` a real Mosquitto, ``HubProcess`` the
+real ``wott-hub run``.
 
 - ``GapMeter(url)``: reads an SSE stream in a thread and keeps when each event came;
   ``longest_gap(since)`` is the longest silence between two events (or since the last one), the

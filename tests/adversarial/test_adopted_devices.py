@@ -7,13 +7,10 @@ the rest at debug. The announced devices are real HTTP servers announced by a re
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 import json
 import logging
-import sys
 import threading
 import time
-from pathlib import Path
 
 import pytest
 from tornado.httpserver import HTTPServer
@@ -23,17 +20,8 @@ from tornado.web import Application, RequestHandler
 from wott_hub.config import HubConfig
 from wott_hub.network import DiscoveryConfig
 
+from . import surroundings as S
 
-def _load(name: str = "wott_adversarial_surroundings"):
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("surroundings.py"))
-        assert spec is not None and spec.loader is not None
-        sys.modules[name] = module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-S = _load()
 EVENT = "skinDeformedDetection"
 GAP_S = 2.5
 

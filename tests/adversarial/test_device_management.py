@@ -8,12 +8,9 @@ the MQTT message rate."""
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 import json
-import sys
 import threading
 import time
-from pathlib import Path
 
 import httpx
 import pytest
@@ -21,17 +18,8 @@ import pytest
 from wott_hub.config import HubConfig
 from wott_hub.runtime.opening import CLOSE_TIMEOUT_S
 
+from . import surroundings as S
 
-def _load(name: str = "wott_adversarial_surroundings"):
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("surroundings.py"))
-        assert spec is not None and spec.loader is not None
-        sys.modules[name] = module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-S = _load()
 EVENT = "skinDeformedDetection"
 GAP_S = 2.5  # a healthy device at 60 Hz is silent ~0.1 s between presses; the faults took 6 s to for ever
 ACTION_TIMEOUT_S = 25.0  # an HTTP client's patience: "never answers" fails here

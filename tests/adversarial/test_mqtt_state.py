@@ -6,11 +6,9 @@ hub carries on (an SSE reader's longest gap)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import signal
 import socket
-import sys
 import time
 from pathlib import Path
 
@@ -18,17 +16,8 @@ import httpx
 
 from wott_hub.config import HubConfig
 
+from . import surroundings as S
 
-def _load(name: str = "wott_adversarial_surroundings"):
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("surroundings.py"))
-        assert spec is not None and spec.loader is not None
-        sys.modules[name] = module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-S = _load()
 EVENT = "skinDeformedDetection"
 GAP_S = 2.5
 

@@ -6,12 +6,10 @@ oracle: an unknown id costs what a known one does, and a flood of them leaves th
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import secrets
 import socket
 import statistics
-import sys
 import threading
 import time
 from pathlib import Path
@@ -22,17 +20,8 @@ import httpx
 from wott_hub.security import Scope, TokenFile
 from wott_hub.security.tokens import split_token
 
+from . import surroundings as S
 
-def _load(name: str = "wott_adversarial_surroundings"):
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("surroundings.py"))
-        assert spec is not None and spec.loader is not None
-        sys.modules[name] = module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-S = _load()
 EVENT = "skinDeformedDetection"
 GAP_S = 2.5
 
