@@ -108,6 +108,17 @@ class RunningHub:
         self._log.flush()
         return self.log_path.read_text(errors="replace")
 
+    def stop(self, timeout: float = 30) -> None:
+        """A clean stop (SIGTERM to the group), SIGKILL after ``timeout``: a killed hub leaves its
+        database's lease to expire, and a hub started on that database meanwhile is refused."""
+        import signal
+
+        if self.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                self.signal(signal.SIGTERM)
+            self.wait(timeout)
+        self.kill()
+
     def kill(self) -> None:
         import os
         import signal

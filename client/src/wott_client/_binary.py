@@ -14,8 +14,8 @@ from collections.abc import AsyncGenerator
 
 import httpx
 
-from ._errors import NotFound, TransportError
 from ._fields import CONTENT_TYPE, Displacement, PacketParser
+from ._stream import Retry, check_stream
 
 __all__ = ["BinaryStream"]
 
@@ -50,7 +50,7 @@ class BinaryStream:
             connected = False
             try:
                 async with self._http.stream("GET", self.url, headers=headers, timeout=self.timeout) as resp:
-                    self._check(resp)
+                    check_stream(resp, self.url, CONTENT_TYPE, "a binary displacement stream")
                     connected = True
                     delay = self.reconnect_s
                     async for chunk in resp.aiter_raw():
@@ -58,24 +58,8 @@ class BinaryStream:
                         if packets:
                             self.last_event_id = packets[-1].event_id
                             yield packets
-            except (httpx.TransportError, _Retry):
+            except (httpx.TransportError, Retry):
                 pass
             await asyncio.sleep(self.reconnect_s if connected else delay)
             if not connected:
                 delay = min(delay * 2, self.max_backoff_s)
-
-    def _check(self, resp: httpx.Response) -> None:
-        code = resp.status_code
-        if code == 404:
-            raise NotFound(f"{self.url}: 404 (no such stream)")
-        if 400 <= code < 500 and code not in (408, 429):
-            raise TransportError(f"{self.url}: HTTP {code}")
-        if code >= 400 or code == 204:
-            raise _Retry
-        ctype = resp.headers.get("content-type", "")
-        if not ctype.startswith(CONTENT_TYPE):
-            raise TransportError(f"{self.url}: not a binary displacement stream (Content-Type {ctype!r})")
-
-
-class _Retry(Exception):
-    """A 5xx, 408 or 429: try again later."""

@@ -17,7 +17,7 @@ import httpx
 from ._errors import NotFound, TransportError
 from ._sse import Message, SSEParser
 
-__all__ = ["ResumableStream"]
+__all__ = ["ResumableStream", "Retry", "check_stream"]
 
 
 class ResumableStream:
@@ -49,7 +49,7 @@ class ResumableStream:
             connected = False
             try:
                 async with self._http.stream("GET", self.url, headers=headers, timeout=self.timeout) as resp:
-                    self._check(resp)
+                    check_stream(resp, self.url, "text/event-stream", "an event stream")
                     connected = True
                     delay = self.reconnect_s
                     async for chunk in resp.aiter_bytes():
@@ -59,7 +59,7 @@ class ResumableStream:
                                 if m.id is not None:
                                     self.last_event_id = m.id
                             yield msgs
-            except (httpx.TransportError, _Retry):
+            except (httpx.TransportError, Retry):
                 pass
             if connected:  # it was up: come back at once (or when the server asked)
                 retry = parser.retry_ms
@@ -68,18 +68,21 @@ class ResumableStream:
                 await asyncio.sleep(delay)
                 delay = min(delay * 2, self.max_backoff_s)
 
-    def _check(self, resp: httpx.Response) -> None:
-        code = resp.status_code
-        if code == 404:
-            raise NotFound(f"{self.url}: 404 (no such stream)")
-        if 400 <= code < 500 and code not in (408, 429):
-            raise TransportError(f"{self.url}: HTTP {code}")
-        if code >= 400 or code == 204:
-            raise _Retry
-        ctype = resp.headers.get("content-type", "")
-        if "text/event-stream" not in ctype:
-            raise TransportError(f"{self.url}: not an event stream (Content-Type {ctype!r})")
-
-
-class _Retry(Exception):
+class Retry(Exception):
     """A 5xx, 408 or 429: try again later."""
+
+
+def check_stream(resp: httpx.Response, url: str, media_type: str, what: str) -> None:
+    """Raise what a stream's response means unless it is the ``media_type`` stream: ``NotFound``
+    (404), ``TransportError`` (another 4xx, or the wrong content type, ``what`` naming the
+    expected stream), ``Retry`` (a 5xx, 408, 429 or 204: come back later)."""
+    code = resp.status_code
+    if code == 404:
+        raise NotFound(f"{url}: 404 (no such stream)")
+    if 400 <= code < 500 and code not in (408, 429):
+        raise TransportError(f"{url}: HTTP {code}")
+    if code >= 400 or code == 204:
+        raise Retry
+    ctype = resp.headers.get("content-type", "")
+    if media_type not in ctype:
+        raise TransportError(f"{url}: not {what} (Content-Type {ctype!r})")
