@@ -48,7 +48,7 @@ import numpy.typing as npt
 
 from wott_hub.events.record import KIND_EVENT, Record, SkinArrays
 
-from .field_codec import PACKED_FIELD, encode_fields, field_texts, field_texts_at
+from .field_codec import PACKED_FIELD, encode_fields, field_texts, field_texts_at, join_spans
 
 __all__ = ["PACKED", "PACKED_FIELD", "SKIN_EVENT", "decode", "decode_joined", "decode_many", "encode",
            "encode_records"]
@@ -292,12 +292,12 @@ def _unpack_at(buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int) ->
     own = ~same
     if own.any():
         ts[own] = buf[(off + 3 + wide)[own, None] + np.arange(8)].copy().view("<i8")[:, 0]
-    micro = _spans(buf, pos + ids_len, 2 * n).view("<u2").astype(np.int64)
+    micro = join_spans(buf, pos + ids_len, 2 * n).view("<u2").astype(np.int64)
     p = _Packets(ts, n, np.empty(0, np.int64), micro)
     if (small | (n == 0)).all():  # the first id, then a byte per gap: runs of n bytes from the
         has = n > 0               # first id's last byte (zeroed), added up
         start = (np.cumsum(n) - n)[has]
-        gaps = _spans(buf, pos + 3, n).astype(np.int64)
+        gaps = join_spans(buf, pos + 3, n).astype(np.int64)
         gaps[start] = 0
         run = np.cumsum(gaps)
         return p._replace(ids=run + np.repeat(_words(buf, pos[has], "<u4") - run[start], n[has]))
@@ -310,21 +310,6 @@ def _unpack_at(buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int) ->
     whole = ~small[packet]  # the others: a uint32 per id
     ids[whole] = _words(buf, (node_pos + 4 * j)[whole], "<u4")
     return p._replace(ids=ids)
-
-
-def _spans(buf: npt.NDArray[np.uint8], at: _Int, length: _Int) -> npt.NDArray[np.uint8]:
-    """The bytes of ``buf`` in the spans [at, at + length), which follow one another, joined:
-    one mask made by ``np.repeat`` (what lies between the spans, the spans alternately)."""
-    runs = np.empty(2 * len(at) + 1, np.int64)
-    end = at + length
-    runs[0:-1:2] = at
-    runs[2:-1:2] -= end[:-1]
-    runs[1::2] = length
-    runs[-1] = len(buf) - (end[-1] if len(at) else 0)
-    keep = np.zeros(len(runs), bool)
-    keep[1::2] = True
-    spans: npt.NDArray[np.uint8] = buf[np.repeat(keep, runs)]
-    return spans
 
 
 def _words(buf: npt.NDArray[np.uint8], at: _Int, dtype: str) -> _Int:

@@ -42,7 +42,7 @@ from wott_hub.events.fields import (
 )
 from wott_hub.events.record import KIND_EVENT, Record
 
-__all__ = ["PACKED_FIELD", "encode_fields", "field_texts", "field_texts_at"]
+__all__ = ["PACKED_FIELD", "encode_fields", "field_texts", "field_texts_at", "join_spans"]
 
 PACKED_FIELD = 0x02
 _SAME_TIME, _IDS16, _VALUES16 = 1, 2, 4
@@ -136,10 +136,11 @@ def _le(buf: npt.NDArray[np.uint8], at: npt.NDArray[np.int64], width: npt.NDArra
     return value
 
 
-def _spans(buf: npt.NDArray[np.uint8], at: npt.NDArray[np.int64],
-           length: npt.NDArray[np.int64]) -> npt.NDArray[np.uint8]:
-    """The bytes of ``buf`` in the spans [at, at + length), which follow one another, joined (one mask
-    made by ``np.repeat``, as ``codec._spans``)."""
+def join_spans(buf: npt.NDArray[np.uint8], at: npt.NDArray[np.int64],
+               length: npt.NDArray[np.int64]) -> npt.NDArray[np.uint8]:
+    """The bytes of ``buf`` in the spans [at, at + length), which follow one another, joined:
+    one mask made by ``np.repeat`` (what lies between the spans, the spans alternately). Both
+    codecs (this one and ``codec``) read their packed columns with it."""
     runs = np.empty(2 * len(at) + 1, np.int64)
     end = at + length
     runs[0:-1:2] = at
@@ -173,8 +174,8 @@ def _unpack(buf: npt.NDArray[np.uint8], off: npt.NDArray[np.int64], size: npt.ND
     if own.any():
         ts[own] = buf[(off + _HEAD.size)[own, None] + np.arange(8)].copy().view("<i8")[:, 0]
     if (id_width == 2).all() and (value_width == 2).all():  # the usual: every packet's numbers in 16 bits
-        ids = _spans(buf, pos, 2 * n).view("<u2").astype(np.int64)
-        micro = _spans(buf, values_at, 6 * n).view("<i2").astype(np.int64).reshape(-1, 3)
+        ids = join_spans(buf, pos, 2 * n).view("<u2").astype(np.int64)
+        micro = join_spans(buf, values_at, 6 * n).view("<i2").astype(np.int64).reshape(-1, 3)
         return ts.tolist(), FieldArrays(ids, micro), n
     packet = np.repeat(np.arange(len(n)), n)
     j = np.arange(len(packet)) - (np.cumsum(n) - n)[packet]
