@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
+from typing import Any
 
 import pytest
 from wott_directory import Directory, DirectoryServer, DirectorySettings
@@ -14,8 +15,8 @@ from wott_directory import Directory, DirectoryServer, DirectorySettings
 class DirectoryThread:
     """A real directory server in a thread with its own event loop."""
 
-    def __init__(self, token: str, db: str = "sqlite://") -> None:
-        self.token = token
+    def __init__(self, token: str, db: str = "sqlite://", **settings: Any) -> None:
+        self.settings = DirectorySettings(token=token, **settings)  # budgets etc. beside the token
         self.db = db
         self.loop = asyncio.new_event_loop()
         self.server: DirectoryServer | None = None
@@ -24,8 +25,7 @@ class DirectoryThread:
 
     def _run(self) -> None:
         asyncio.set_event_loop(self.loop)
-        directory = Directory(DirectorySettings(token=self.token), self.db)
-        self.server = self.loop.run_until_complete(DirectoryServer(directory).start())
+        self.server = self.loop.run_until_complete(DirectoryServer(Directory(self.settings, self.db)).start())
         self._ready.set()
         self.loop.run_forever()
 
@@ -38,6 +38,11 @@ class DirectoryThread:
     def url(self) -> str:
         assert self.server is not None
         return self.server.url
+
+    @property
+    def directory(self) -> Directory:
+        assert self.server is not None
+        return self.server.directory
 
     def stop(self) -> None:
         assert self.server is not None

@@ -6,7 +6,6 @@ client's reads keep answering."""
 
 from __future__ import annotations
 
-import asyncio
 import json
 import sqlite3
 import threading
@@ -17,7 +16,8 @@ from typing import Any
 
 import httpx
 import pytest
-from wott_directory import Directory, DirectoryServer, DirectorySettings
+
+from .conftest import DirectoryThread
 
 TOKEN = "budget-token"
 MIB = 1024 * 1024
@@ -27,51 +27,13 @@ MERGE_PATCH = {**AUTH, "Content-Type": "application/merge-patch+json"}
 READ_BOUND_S = 1.5  # an idle read answers in milliseconds; validating on the loop held reads ~5 s
 
 
-class Tdd:
-    """A directory server with its own settings, in a thread with its own event loop."""
-
-    def __init__(self, settings: DirectorySettings, db: str) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.settings, self.db = settings, db
-        self.server: DirectoryServer | None = None
-        self._ready = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def _run(self) -> None:
-        asyncio.set_event_loop(self.loop)
-        self.server = self.loop.run_until_complete(DirectoryServer(Directory(self.settings, self.db)).start())
-        self._ready.set()
-        self.loop.run_forever()
-
-    def start(self) -> Tdd:
-        self._thread.start()
-        assert self._ready.wait(30), "the directory did not start"
-        return self
-
-    @property
-    def url(self) -> str:
-        assert self.server is not None
-        return self.server.url
-
-    @property
-    def directory(self) -> Directory:
-        assert self.server is not None
-        return self.server.directory
-
-    def stop(self) -> None:
-        assert self.server is not None
-        asyncio.run_coroutine_threadsafe(self.server.stop(), self.loop).result(30)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self._thread.join(10)
-
-
 @pytest.fixture
 def db(tmp_path: Path) -> Path:
     return tmp_path / "tdd.db"
 
 
-def started(db: Path, **settings: Any) -> Tdd:
-    return Tdd(DirectorySettings(token=TOKEN, **settings), f"sqlite:///{db}").start()
+def started(db: Path, **settings: Any) -> DirectoryThread:
+    return DirectoryThread(TOKEN, f"sqlite:///{db}", **settings).start()
 
 
 @pytest.fixture
