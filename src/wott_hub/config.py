@@ -93,8 +93,9 @@ class HubConfig:
         "Delete events older than this many days; default: keep them."))
     retention_mb: Megabytes | None = field(default=None, metadata=doc(
         "Keep the history under this many MB (oldest deleted first); default: no limit."))
-    history_batch_ms: BatchMs = field(default=50.0, metadata=doc(
-        "The history writer commits at most this often (one transaction per batch), ms."))
+    history_batch_ms: BatchMs | None = field(default=None, metadata=doc(
+        "The history writer commits at most this often (one transaction per batch), ms; default: "
+        "200 with history_durability fast, 50 with committed (docs/history.md, \"Commit interval\")."))
     history_batch_max: BatchMax = field(default=20_000, metadata=doc(
         "... or as soon as this many records wait."))
     history_durability: Durability = field(default="fast", metadata=doc(
@@ -202,6 +203,16 @@ class HubConfig:
         if errors:
             raise ConfigError("\n".join(errors))
         return cls(devices=tuple(parsed), demo=not parsed, source=source, **tables, **values)
+
+    @property
+    def commit_interval_s(self) -> float:
+        """Seconds between history commits: ``history_batch_ms``, else by durability. Each commit
+        writes every index page a batch touched, ~110 at 32 devices whatever the batch's size;
+        200 ms batches spend ~40 % less of the history process's CPU than 50 ms ones, where a
+        subscriber waits for the commit (committed) the shorter wait is worth it."""
+        if self.history_batch_ms is not None:
+            return self.history_batch_ms / 1000
+        return 0.05 if self.history_durability == "committed" else 0.2
 
     @property
     def retention(self) -> Retention:

@@ -79,3 +79,32 @@ def test_damaged_packed_bytes_raise_instead_of_reading_garbage():
         field_texts([good[:-3]], [T0])
     with pytest.raises(ValueError, match="damaged"):
         field_texts([good[:2]], [T0])
+
+
+@pytest.mark.parametrize("outlier", [None, "id", "value", "empty"])
+def test_a_batch_of_pipeline_records_packs_as_each_record_alone(outlier):
+    """The batch path (``_pack_many``: one quantisation and one conversion for all the records the
+    pipeline made) gives each record the bytes ``_pack`` gives it alone, and decodes to its text;
+    one record beyond the 16-bit forms (or with no node) sends the batch one by one."""
+    from wott_hub.history.field_codec import _pack, encode_fields
+
+    rng = np.random.default_rng(7)
+    recs, alone = [], []
+    for k in range(300):
+        ids = np.sort(rng.choice(700, int(rng.integers(1, 30)), replace=False))
+        mm = rng.normal(0, 1.5, (len(ids), 3))
+        if k == 150 and outlier == "id":
+            ids[-1] = 70_000
+        elif k == 150 and outlier == "value":
+            mm[0, 0] = 40.0
+        elif k == 150 and outlier == "empty":
+            ids, mm = ids[:0], mm[:0]
+        t = T0 + k * 8_333_333
+        rec = FieldRecord("d", k + 1, t, rows=(ids, mm.copy()))  # as the pipeline hands it over
+        if k % 7 == 0:
+            rec.field  # noqa: B018 - quantised already (a subscriber read it first)
+        recs.append(rec)
+        alone.append(_pack(t, t, FieldArrays.of(ids, mm)))
+    stored = encode_fields(recs)
+    assert stored == alone
+    assert decode_many(stored, [r.t_ns for r in recs]) == [r.data for r in recs]

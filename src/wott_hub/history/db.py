@@ -59,6 +59,9 @@ def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:
     cur.execute("PRAGMA synchronous=NORMAL")
     cur.execute("PRAGMA busy_timeout=10000")
     cur.execute("PRAGMA cache_size=-32000")  # 32 MB page cache: replay/export read sequentially
+    # a batch's multi-row INSERT keeps a statement journal (to undo that statement alone): in a
+    # temporary file made and deleted per statement (~45 a second at 32 devices, strace); in memory
+    cur.execute("PRAGMA temp_store=MEMORY")
     cur.close()
 
 

@@ -88,7 +88,7 @@ class HubHistory:
                 if self._closing:
                     raise _Closed
                 writer = HistoryWriter(engine, batch_max=cfg.history_batch_max,
-                                       interval_s=cfg.history_batch_ms / 1000, retention=cfg.retention,
+                                       interval_s=cfg.commit_interval_s, retention=cfg.retention,
                                        on_commit=committed, process=cfg.history_process,
                                        spool=Spool(spool_folder(cfg, self.hub_id),
                                                    int(cfg.history_spool_mb * 1e6)),
