@@ -73,15 +73,25 @@ def cpu_cell(r: dict) -> str:
                       for kind, key in (("SSE", "sse-lean"), ("WS", "ws-lat")) if key in r["cpu"])
 
 
-def history_cpu_s() -> float:
-    """CPU seconds of this process's history writer process (``history/batch_process.py``): part of
-    the hub's CPU, though not in its own process (0 with ``history_process = false``)."""
+def cpu_per_frame(r: dict) -> float:
+    """The hub's CPU per frame processed, µs: its process, its history process and its workers in the
+    SSE phase over the frames processed in that window (issue 35's figure)."""
+    return 1e4 * r["cpu"]["sse-lean"][0] / max(1.0, r["sse"][0] / r["duration"])
+
+
+_HUB_CHILDREN = (b"wott_hub.history.batch_process", b"multiprocessing.spawn")
+"""The hub's own child processes: its history process and its worker processes (not the clients)."""
+
+
+def children_cpu_s() -> float:
+    """CPU seconds of this process's history writer process (``history/batch_process.py``) and of its
+    worker processes (``runtime/pool.py``): part of the hub's CPU, though not in its own process."""
     import os
 
     total = 0.0
     for pid in descendants(os.getpid()):
         try:
-            if b"wott_hub.history.batch_process" in Path(f"/proc/{pid}/cmdline").read_bytes():
+            if any(mark in Path(f"/proc/{pid}/cmdline").read_bytes() for mark in _HUB_CHILDREN):
                 total += cpu_s(pid)
         except FileNotFoundError:  # a process that has just exited
             pass
@@ -206,9 +216,9 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
         c = Client({**spec, "duration": duration + 1.0})
         await c.ready()
         await asyncio.sleep(0.5)  # warm-up
-        t0, cpu0 = now_ns(), time.process_time() + history_cpu_s()
+        t0, cpu0 = now_ns(), time.process_time() + children_cpu_s()
         await asyncio.sleep(duration)
-        t1, cpu1 = now_ns(), time.process_time() + history_cpu_s()
+        t1, cpu1 = now_ns(), time.process_time() + children_cpu_s()
         res = await c.result()
         cpu[spec["kind"]] = (100 * (cpu1 - cpu0) / ((t1 - t0) / 1e9),
                              100 * res.get("cpu_s", float("nan")) / res.get("window_s", float("nan")))
@@ -266,7 +276,7 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
             "ws_stages": {"fanout": (pct(raw_fanout, 50), pct(raw_fanout, 99)),
                           "transport": (pct(raw_transport, 50), pct(raw_transport, 99))},
             "wotpy_after_write": (pct(wot_after, 50), pct(wot_after, 99)),
-            "wotpy_decode": wot_res.get("decode_ns", float("nan")), "cpu": cpu}
+            "wotpy_decode": wot_res.get("decode_ns", float("nan")), "cpu": cpu, "duration": duration}
 
 
 async def latency_plain(n_dev: int, duration: float) -> dict:
@@ -352,7 +362,7 @@ async def displacement_ab(n: int, dur: float, tmp: Path, pairs: int = 3) -> list
             r = await latency_ours(n, dur, tmp, with_wotpy=False, displacement=sub)
             fps[sub].append(r["sse"][0] / dur)
             p99[sub].append(r["sse"][3])
-            cpu[sub].append(1e4 * r["cpu"]["sse-lean"][0] / max(1.0, r["sse"][0] / dur))
+            cpu[sub].append(cpu_per_frame(r))
     med = statistics.median
     drop = 100 * (1 - med(fps[True]) / med(fps[False]))
     more = 100 * (med(cpu[True]) / med(cpu[False]) - 1)
@@ -384,13 +394,13 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
             runs.sort(key=lambda x: x["sse"][3])
             r = runs[1]
             repeats.append((n, [x["sse"][3] for x in runs], [x["ws"][3] for x in runs],
-                            [x["sse"][0] / dur for x in runs]))
+                            [x["sse"][0] / dur for x in runs], [cpu_per_frame(x) for x in runs]))
         # plain wotpy saturates at 8 devices already (and exposing 32 there is O(N^3))
         p = await latency_plain(n, dur) if n <= 8 else None
         rows.append([n, f"{r['sse'][0] / dur:.0f} / {n * 120}", cell(r["sse"]), cell(r["ws"]),
                      cell(r["wotpy"]) if n <= 8 else "not run (saturated at 8)",
                      cell((p["published"], p["ws_received"], p["ws_p50"], p["ws_p99"])) if p
-                     else "not run (saturated at 8)", cpu_cell(r)])
+                     else "not run (saturated at 8)", cpu_cell(r), f"{cpu_per_frame(r):.0f}"])
         if n >= 8 and not quick or n == 8:
             counts = workers or DEFAULT_WORKERS
             variants = [(f"workers = {w}", {"workers": w}) for w in counts]
@@ -407,7 +417,7 @@ async def run(tmp: Path, *, quick: bool, devices: tuple[int, ...] | None = None,
                                      cell(w["ws"]),
                                      *(f"{ms(a)} / {ms(b)}" for a, b in (
                                          w["stages"]["processing"], w["stages"]["fanout"],
-                                         w["stages"]["transport"])), cpu_cell(w)])
+                                         w["stages"]["transport"])), cpu_cell(w), f"{cpu_per_frame(w):.0f}"])
                 print(variant_rows[-1], flush=True)
         if ab:
             ab_rows.append(await displacement_ab(n, dur, tmp))

@@ -182,10 +182,13 @@ class FieldRecord(Record):
     @property
     def field(self) -> FieldArrays:
         """The packet's numbers in µm (quantised here the first time they are needed)."""
+        # _rows is read first: whoever quantises sets _field, then clears _rows (here, or the history
+        # writer's thread for a batch: ``quantise_all``), so a reader never finds both empty
+        rows = self._rows
         field = self._field
         if field is None:
-            assert self._rows is not None  # one of the two is always set
-            field = self._field = FieldArrays.of(*self._rows)
+            assert rows is not None  # one of the two is always set
+            field = self._field = FieldArrays.of(*rows)
             self._rows = None
         return field
 
