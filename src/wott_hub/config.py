@@ -95,7 +95,7 @@ class HubConfig:
         "Keep the history under this many MB (oldest deleted first); default: no limit."))
     history_batch_ms: BatchMs | None = field(default=None, metadata=doc(
         "The history writer commits at most this often (one transaction per batch), ms; default: "
-        "200 with history_durability fast, 50 with committed (docs/history.md, \"Commit interval\")."))
+        "100 with history_durability fast, 50 with committed (docs/history.md, \"Commit interval\")."))
     history_batch_max: BatchMax = field(default=20_000, metadata=doc(
         "... or as soon as this many records wait."))
     history_durability: Durability = field(default="fast", metadata=doc(
@@ -207,12 +207,13 @@ class HubConfig:
     @property
     def commit_interval_s(self) -> float:
         """Seconds between history commits: ``history_batch_ms``, else by durability. Each commit
-        writes every index page a batch touched, ~110 at 32 devices whatever the batch's size;
-        200 ms batches spend ~40 % less of the history process's CPU than 50 ms ones, where a
-        subscriber waits for the commit (committed) the shorter wait is worth it."""
+        writes every index page its batch touched, ~110 at 32 devices whatever the batch's size:
+        fewer commits cost the history process less CPU but arrive as longer bursts, which delay
+        the subscribers' clients on a busy machine (docs/history.md, "Commit interval"); where a
+        subscriber waits for the commit (committed), the shorter wait is worth more."""
         if self.history_batch_ms is not None:
             return self.history_batch_ms / 1000
-        return 0.05 if self.history_durability == "committed" else 0.2
+        return 0.05 if self.history_durability == "committed" else 0.1
 
     @property
     def retention(self) -> Retention:
