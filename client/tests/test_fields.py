@@ -90,6 +90,8 @@ def test_displacements_from_the_binary_form_have_the_norms_of_the_frames_intensi
 
 
 def test_without_a_binary_form_the_sse_json_gives_the_same_arrays(hub, run):
+    """The same packets (by event id) read from the JSON form and from the binary form at once:
+    the same node ids, the same float32 vectors, the same time stamps."""
     url = _td_url(hub, "pad")
     td = httpx.get(url).json()
     json_only = copy.deepcopy(td)
@@ -98,17 +100,29 @@ def test_without_a_binary_form_the_sse_json_gives_the_same_arrays(hub, run):
 
     async def scenario():
         async with AsyncClient() as c:
-            thing = c.thing_from_td(json_only, url)
-            got = []
-            async with aclosing(thing.async_displacements()) as it:
-                async for d in it:
-                    got.append(d)
-                    if len(got) == 5:
-                        return thing, got
+            from_json, from_binary = c.thing_from_td(json_only, url), c.thing_from_td(td, url)
+            got: dict[bool, dict[str, Displacement]] = {False: {}, True: {}}
 
-    thing, got = run(scenario())
-    assert thing._displacement_form()[1] is False
-    assert all(d.vectors.dtype == np.float32 and int(d.event_id) > 0 for d in got)
+            async def read(thing, binary: bool) -> None:
+                async with aclosing(thing.async_displacements()) as it:
+                    async for d in it:
+                        got[binary][d.event_id] = d
+                        if len(got[False].keys() & got[True].keys()) >= 5:
+                            return
+
+            await asyncio.wait_for(asyncio.gather(read(from_json, False), read(from_binary, True),
+                                                  return_exceptions=False), 60)
+            return from_json, from_binary, got
+
+    from_json, from_binary, got = run(scenario())
+    assert from_json._displacement_form()[1] is False and from_binary._displacement_form()[1] is True
+    common = sorted(got[False].keys() & got[True].keys(), key=int)
+    assert len(common) >= 5
+    for event_id in common:
+        j, b = got[False][event_id], got[True][event_id]
+        assert j.vectors.dtype == b.vectors.dtype == np.float32 and j.timestamp_ns == b.timestamp_ns
+        assert j.ids.tolist() == b.ids.tolist()
+        np.testing.assert_array_equal(j.vectors, b.vectors)
 
 
 def test_raw_frames_as_arrays_and_bad_input_named(recorded, eventually):

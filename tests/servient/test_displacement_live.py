@@ -175,7 +175,7 @@ def test_every_binding_gives_the_vectors_of_the_frames_intensities_and_the_scene
 
 def test_the_binary_stream_resumes_after_a_packet_and_a_replay_serves_the_recorded_vectors(tmp_path, run):
     async def scenario() -> None:
-        hub, _ = await _hub(tmp_path)
+        hub, driver = await _hub(tmp_path)
         try:
             url = f"{hub.td_url('pad')}/events/skinDisplacement/binary"
             first: list = []
@@ -198,8 +198,13 @@ def test_the_binary_stream_resumes_after_a_packet_and_a_replay_serves_the_record
             await _sse(f"{replay_url}/events/skinDisplacement", 10, got)
             replayed_bin: list = []
             await _binary_http(f"{replay_url}/events/skinDisplacement/binary", 10, replayed_bin)
-            for seq, _ts, ids, vec in replayed_bin:
-                assert seq > 0 and len(ids) == len(vec)
+            # the recorded packets, as the scene made them: the replay keeps their time stamps
+            replayed = [(p["timeStamp"], *_vectors(p)) for _, p in got]
+            replayed += [(ts, ids.tolist(), vec.astype(np.float64)) for _, ts, ids, vec in replayed_bin]
+            for ts, ids, vec in replayed:
+                np.testing.assert_allclose(vec, driver.truth[ts][ids], atol=QUANTUM_MM + FLOAT32)
+            assert sum(len(ids) > 0 for _, ids, _ in replayed) >= 5
+            assert all(seq > 0 for seq, *_ in replayed_bin)
         finally:
             await hub.stop()
 
