@@ -34,7 +34,8 @@ def _head(i: int) -> str:
 class _Reprs(dict[float, str]):
     """``repr`` of each intensity seen, kept: intensities are rounded (to 1 µm by default), so a
     device's packets repeat a few thousand values, and a lookup costs a fifth of a float's repr
-    (the skin packet's text 8.0 against 4.5 µs for the hub benchmark's press frame)."""
+    (the skin packet's text 8.0 against 4.5 µs for the hub benchmark's press frame). Keyed by value:
+    -0.0 would find 0.0's text, but an intensity is a norm (or a release's zero), never -0.0."""
 
     def __missing__(self, value: float) -> str:
         if len(self) >= REPRS_MAX:  # a processor that does not round: keep the memory bounded
