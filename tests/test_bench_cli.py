@@ -72,3 +72,16 @@ def test_a_run_of_some_hub_groups_keeps_the_other_groups_tables(monkeypatch, tmp
     assert "S2" in text and "S1" not in text  # the group re-run replaces its table
     assert "### Latency: old (ms)\n\nL1\n\n(Not re-run: kept from `old` · 2026-11-22.)" in text
     assert text.count("(Not re-run") == 2 and "kept from `older`" in text  # an older note stays as it was
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["/nonexistent"], "not a wott-hub checkout"),
+    ([str(ROOT), "--rounds", "0"], "--rounds"),
+    ([str(ROOT), "--duration", "0"], "--duration"),
+    ([], "DIR"),
+])
+def test_alternate_bad_options_are_one_line_and_exit_2(args, message):
+    res = _bench("alternate", *args)
+    assert res.returncode == 2
+    assert message in res.stderr.splitlines()[-1]
+    assert "Traceback" not in res.stderr and not res.stdout  # nothing measured

@@ -1,0 +1,92 @@
+"""``wott-hub bench alternate DIR [DIR ...]``: the latency group's point in several checkouts, alternated.
+
+For the issues' "no worse than commit X" (28, 29, 35): a single `bench hub` invocation measures one
+checkout, and the machine drifts by more than the differences sought from one invocation to the
+next. Here each run is a process of its own in its checkout (``DIR/.venv``, made by ``uv sync``),
+running that checkout's own ``bench_hub.latency.latency_ours`` (the hub, the devices and the clients
+as `bench hub` runs them, SSE and WebSocket phases, no wotpy client) after a 2 s warm-up run; the
+checkouts take turns, ``--rounds`` times, and the medians are printed. Printed only: the numbers go
+into docs/benchmarks.md by hand, with the checkouts' commits.
+
+    uv run wott-hub bench alternate ../before . --devices 32 --rounds 4
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["main"]
+
+_RUN = """
+import asyncio, json, sys, tempfile
+from pathlib import Path
+sys.path.insert(0, "benchmarks")
+from bench_hub import latency as L
+async def main(n, dur):
+    await L.latency_ours(n, 2.0, Path(tempfile.mkdtemp()), with_wotpy=False)  # warm-up, not kept
+    r = await L.latency_ours(n, dur, Path(tempfile.mkdtemp()), with_wotpy=False)
+    fps = r["sse"][0] / dur
+    print(json.dumps({"fps": fps, "sse_p99": r["sse"][3] / 1e6, "ws_p99": r["ws"][3] / 1e6,
+                      "cpu_us": 1e4 * r["cpu"]["sse-lean"][0] / max(1.0, fps),
+                      "stages_p99": {k: v[1] / 1e6 for k, v in r["stages"].items()}}))
+asyncio.run(main(int(sys.argv[1]), float(sys.argv[2])))
+"""
+
+_COLUMNS = (("fps", "frames/s", "{:.0f}"), ("sse_p99", "SSE p99 ms", "{:.2f}"),
+            ("ws_p99", "WS p99 ms", "{:.2f}"), ("cpu_us", "hub CPU µs/frame", "{:.0f}"))
+
+
+def _checkout(text: str) -> Path:
+    path = Path(text).resolve()
+    if not (path / ".venv" / "bin" / "python").exists() or not (path / "benchmarks" / "bench_hub").is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: not a wott-hub checkout with its .venv (uv sync there)")
+    return path
+
+
+def _commit(path: Path) -> str:
+    done = subprocess.run(["git", "-C", str(path), "log", "-1", "--format=%h"], capture_output=True,
+                          text=True)
+    return done.stdout.strip() or path.name
+
+
+def _run(path: Path, devices: int, duration: float) -> dict:
+    done = subprocess.run([str(path / ".venv" / "bin" / "python"), "-c", _RUN, str(devices), str(duration)],
+                          cwd=path, capture_output=True, text=True, timeout=600)
+    lines = done.stdout.strip().splitlines()
+    if done.returncode != 0 or not lines:
+        raise SystemExit(f"{path}: the run failed: {done.stderr.strip()[-2000:]}")
+    result: dict = json.loads(lines[-1])
+    return result
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="wott-hub bench alternate", description=__doc__.split("\n\n")[0])
+    ap.add_argument("checkouts", nargs="+", type=_checkout, metavar="DIR")
+    ap.add_argument("--devices", type=int, default=32, help="devices at 120 Hz (default 32)")
+    ap.add_argument("--duration", type=float, default=6.0, help="seconds measured per run (default 6)")
+    ap.add_argument("--rounds", type=int, default=3, help="runs per checkout, alternated (default 3)")
+    args = ap.parse_args(argv)
+    if args.devices < 1 or args.rounds < 1 or not args.duration > 0:
+        ap.error("--devices and --rounds must be at least 1, --duration positive")
+    names = [f"{_commit(p)} ({p.name})" for p in args.checkouts]
+    runs: dict[str, list[dict]] = {name: [] for name in names}
+    for k in range(args.rounds):
+        for name, path in zip(names, args.checkouts, strict=True):
+            r = _run(path, args.devices, args.duration)
+            runs[name].append(r)
+            cells = " · ".join(f"{label} {fmt.format(r[key])}" for key, label, fmt in _COLUMNS)
+            stages = ", ".join(f"{stage} {p99:.2f}" for stage, p99 in r["stages_p99"].items())
+            print(f"round {k + 1} {name}: {cells} · stage p99 ms: {stages}", flush=True)
+    print(f"\nmedians of {args.rounds} runs, {args.devices} devices x 120 Hz, {args.duration:g} s each:")
+    for name, rs in runs.items():
+        print(f"{name}: " + " · ".join(f"{label} {fmt.format(statistics.median(r[key] for r in rs))}"
+                                       for key, label, fmt in _COLUMNS))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
