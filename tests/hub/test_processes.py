@@ -112,7 +112,7 @@ def test_sigkill_mid_stream_then_restart_loses_nothing_committed(config_file, tm
         resumed = read_sse(f"{info['devices']['pad']}/events", 100, last_id=last_seen)
     finally:
         proc.send_signal(signal.SIGTERM)
-        assert proc.wait(30) == 0  # clean shutdown
+        assert proc.wait(30) == 0, proc.stderr.read()[-3000:]  # clean shutdown
     ids = [i for i, _ in resumed]
     assert ids == sorted(set(ids)) and ids[0] > last_seen  # the sequence continues, nothing reused
     rows_after = _rows(tmp_path / "hub.db")
@@ -126,7 +126,7 @@ def test_history_and_replay_commands(config_file, tmp_path, read_sse, sse_events
         read_sse(f"{info['devices']['pad']}/events", 200)
     finally:
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(30) == 0
+        assert proc.wait(30) == 0, proc.stderr.read()[-3000:]
     db = str(tmp_path / "hub.db")
     listing = subprocess.run([WOTT_HUB, "history", "list", "--database", db, "--json", "--count"],
                              capture_output=True, text=True, check=True)
@@ -163,5 +163,5 @@ def test_run_without_arguments_serves_the_demo_and_stops_cleanly(tmp_path):
         assert info["ready_s"] <= time.monotonic() - t0 + 1  # reported from the process start
     finally:
         proc.send_signal(signal.SIGTERM)
-        assert proc.wait(30) == 0
+        assert proc.wait(30) == 0, proc.stderr.read()[-3000:]
     assert (tmp_path / "wott-hub.db").exists()
