@@ -84,7 +84,7 @@ def served_tds(fleet, eventually) -> dict[str, dict[str, Any]]:
 @pytest.fixture(scope="module")
 def playground(node_wot, served_tds, contexts, tmp_path_factory) -> dict[str, dict[str, Any]]:
     """The playground's report of each TD (validate_tds.mjs), by where the TD was read. A TD served
-    byte for byte the same at two places (a Thing's own URL and the catalogue, say) is validated
+    the same (equal as JSON) at two places (a Thing's own URL and the directory, say) is validated
     once and its report given to both: the validators are deterministic, and each TD costs them
     ~0.5 s."""
     work = tmp_path_factory.mktemp("playground")
