@@ -192,9 +192,7 @@ class EventPlane:
         st.counts[rec.name] += 1
         ring = st.ring
         ring.append(rec)
-        # trimmed only when the oldest is committed (or past the hard cap): while history lags,
-        # this test, not a call, is what each record pays
-        if len(ring) > self.ring_size and (ring[0].seq <= st.committed or len(ring) > self.ring_hard_cap):
+        if len(ring) > self.ring_size:
             self._trim(st)
         if st.record and self.history_sink is not None:
             self.history_sink.submit(rec)
