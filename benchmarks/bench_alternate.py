@@ -30,7 +30,7 @@ from bench_hub import latency as L
 async def main(n, dur):
     await L.latency_ours(n, 2.0, Path(tempfile.mkdtemp()), with_wotpy=False)  # warm-up, not kept
     r = await L.latency_ours(n, dur, Path(tempfile.mkdtemp()), with_wotpy=False)
-    fps = r["sse"][0] / dur
+    fps = r["sse"][0] / dur  # cpu_us: latency.cpu_per_frame, written out (older checkouts lack it)
     print(json.dumps({"fps": fps, "sse_p99": r["sse"][3] / 1e6, "ws_p99": r["ws"][3] / 1e6,
                       "cpu_us": 1e4 * r["cpu"]["sse-lean"][0] / max(1.0, fps),
                       "stages_p99": {k: v[1] / 1e6 for k, v in r["stages"].items()}}))
