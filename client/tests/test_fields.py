@@ -110,8 +110,7 @@ def test_without_a_binary_form_the_sse_json_gives_the_same_arrays(hub, run):
                         if len(got[False].keys() & got[True].keys()) >= 5:
                             return
 
-            await asyncio.wait_for(asyncio.gather(read(from_json, False), read(from_binary, True),
-                                                  return_exceptions=False), 60)
+            await asyncio.wait_for(asyncio.gather(read(from_json, False), read(from_binary, True)), 60)
             return from_json, from_binary, got
 
     from_json, from_binary, got = run(scenario())
