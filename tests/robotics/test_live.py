@@ -124,6 +124,29 @@ def test_only_what_a_client_subscribes_to_is_built(tmp_path, press_scene, run, w
     run(main())
 
 
+def test_messages_are_not_held_by_nagle(tmp_path, press_scene, run, wait_for):
+    """The SDK accepts clients without TCP_NODELAY; the hub turns it on through the listener
+    (``robotics.nagle``): small messages would otherwise wait for the client's delayed ACK."""
+    import socket
+
+    from wott_hub.hub import Hub
+    from wott_hub.robotics.nagle import ESTABLISHED, descriptors
+
+    async def main():
+        async with Hub(_config(tmp_path, press_scene, history=False)) as hub:
+            c = await _client(hub, wait_for)
+            accepted = descriptors(hub._foxglove.port, ESTABLISHED)
+            assert len(accepted) == 1
+            with socket.socket(fileno=accepted[0]) as s:
+                try:
+                    assert s.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+                finally:
+                    s.detach()  # the SDK's descriptor, not ours to close
+            await c.close()
+
+    run(main())
+
+
 def test_mesh_and_frames_on_subscribe_and_the_latest_scene_always_drawn(tmp_path, press_scene, run,
                                                                          wait_for):
     from wott_hub.hub import Hub

@@ -38,6 +38,7 @@ from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
 
 from .channel import Channel, Out
 from .mapping import CONTACTS, LOG_EVENTS, FleetMapping
+from .nagle import disable_nagle
 from .names import TF_TOPIC
 from .raw_signals import DISPLACEMENT_EVENT, ImageFrame, TaxelGrid
 
@@ -113,6 +114,9 @@ class FoxgloveLive:
             name=self.name, host=self.cfg.host, port=self.cfg.port, context=self.context,
             server_listener=_Listener(self), capabilities=[],
             message_backlog_size=self.cfg.backlog, tls_cert=cert, tls_key=key)
+        if not disable_nagle(self.port or 0):
+            log.warning("Foxglove: the listener on port %s was not found to turn Nagle's algorithm off "
+                        "(not Linux?): messages may wait up to 40 ms for the client's ACK", self.port)
         self._channel(self._tf_channel(), "")
 
     def stop(self) -> None:

@@ -1,0 +1,67 @@
+"""Nagle's algorithm off on the Foxglove endpoint's sockets: an adapter around ``foxglove-sdk``.
+
+Why: the SDK (0.30) accepts its clients without ``TCP_NODELAY``. Its messages are small (a skin
+packet is ~300 bytes) and sent back to back, so Nagle holds each behind the previous one's ACK,
+and the client's delayed ACK (up to 40 ms on Linux) sets the pace: frame in -> Foxglove client
+p50 ~17 ms, p99 ~34 ms at 8 devices x 120 Hz, against 10 ms (issue 30; docs/benchmarks.md). ROS's
+own ``foxglove_bridge`` sets the option on every client socket for this reason.
+
+How: the SDK exposes neither its listener nor its accepted sockets, but Linux copies
+``TCP_NODELAY`` from a listening socket to every socket it accepts. So the listener bound to our
+port is found among this process's descriptors (``/proc/self/net/tcp*`` gives the listening
+socket's inode, ``/proc/self/fd`` the descriptor holding it) and the option set on a duplicate
+of that descriptor (the same socket; the SDK's descriptor is never closed or changed). Clients
+that connected before this call keep Nagle: it runs right after the server is bound, before the
+address is announced. Elsewhere than Linux (no ``/proc``) nothing is found and the caller logs it.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from pathlib import Path
+
+__all__ = ["disable_nagle"]
+
+LISTEN, ESTABLISHED = "0A", "01"  # the kernel's TCP states as /proc/net/tcp writes them
+
+
+def _inodes(port: int, state: str) -> set[str]:
+    inodes = set()
+    for table in ("tcp", "tcp6"):
+        try:
+            lines = Path(f"/proc/self/net/{table}").read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            local, st, inode = fields[1], fields[3], fields[9]
+            if st == state and int(local.rpartition(":")[2], 16) == port:
+                inodes.add(inode)
+    return inodes
+
+
+def descriptors(port: int, state: str = LISTEN) -> list[int]:
+    """This process's descriptors of TCP sockets on local ``port`` in ``state``."""
+    inodes = _inodes(port, state)
+    found = []
+    for fd in os.listdir("/proc/self/fd") if inodes else ():
+        try:
+            target = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:  # closed since listed
+            continue
+        if target.startswith("socket:[") and target[8:-1] in inodes:
+            found.append(int(fd))
+    return found
+
+
+def disable_nagle(port: int) -> int:
+    """Set ``TCP_NODELAY`` on this process's sockets listening on ``port``; how many were found."""
+    fds = descriptors(port)
+    for fd in fds:
+        dup = socket.socket(fileno=os.dup(fd))
+        try:
+            dup.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        finally:
+            dup.close()
+    return len(fds)
