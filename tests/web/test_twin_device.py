@@ -43,17 +43,23 @@ def test_device_page_builds_the_mesh_from_the_td_and_deforms_it_live(twin, barre
                           " return {type: d.type, n: d.x.length, tri: d.i.length}; })()")
     assert trace == {"type": "mesh", "n": 707, "tri": 1374}
     assert page.locator("#skin canvas").count() >= 1
-    # the scene presses 4 mm: a deep packet is drawn, coloured by intensity, and actions show
-    # (the trace's intensities are those of the packet applied last, checked in the same instant)
-    # A deep packet drawn and nothing newer applied: hold that picture (the page's "hold" box) for the
-    # screenshot, in the same instant, so the image shows the press.
+    # the scene presses 4 mm: a deep packet is drawn, coloured by intensity, and actions show.
+    # A deep packet applied: hold that picture (the page's "hold" box) in the same instant, so nothing
+    # newer is applied; its draw reaches the screen at the next animation frame, and the trace's
+    # intensities are that packet's. (While packets come at 120 Hz a frame applies a new one before
+    # the last one's "drawn" stamp: waiting for both to be equal without holding was luck.)
     wait(page,
-        """() => { const t = window.twin, d = document.getElementById('skin').data[0];
-                   const deep = t.drawn && t.drawn.max > 3 && t.drawn.seq === t.applied.seq && t.contacts > 0
-                     && t.action && Math.max(...d.intensity) === t.applied.max;
+        """() => { const t = window.twin;
+                   const deep = t.applied && t.applied.max > 3 && t.contacts > 0 && t.action;
                    if (deep) t.freeze = document.getElementById('freeze').checked = true;
                    return deep; }""",
         timeout=15_000)
+    wait(page,
+        """() => { const t = window.twin, d = document.getElementById('skin').data[0];
+                   return t.drawn && t.drawn.seq === t.applied.seq
+                     && Math.max(...d.intensity) === t.applied.max; }""",
+        timeout=5_000)
+    assert page.evaluate("window.twin.drawn.max") > 3
     screenshot(page, "twin-barrel")
     page.uncheck("#freeze")
     assert page.evaluate("window.twin.freeze") is False
