@@ -155,11 +155,12 @@ async def _fleet(hub, n_dev: int, stamps: dict, delivered: dict | None = None):
 
 
 async def latency(tmp: Path, n_dev: int, seconds: float) -> dict:
-    from wott_hub.hub import Hub
+    from wott_hub.hub import Hub, tune_for_hub
 
     hub = Hub(hub_config(tmp, foxglove=True))
     hub._plane.trace = True
     await hub.start()
+    tune_for_hub()  # what `wott-hub run` does after start-up
     try:
         stamps: dict[tuple[str, int], int] = {}
         ids = await _fleet(hub, n_dev, stamps)
@@ -194,11 +195,12 @@ async def latency(tmp: Path, n_dev: int, seconds: float) -> dict:
 
 
 async def idle(tmp: Path, n_dev: int, seconds: float, foxglove: bool) -> dict:
-    from wott_hub.hub import Hub
+    from wott_hub.hub import Hub, tune_for_hub
 
     hub = Hub(hub_config(tmp, foxglove=foxglove))
     hub._plane.trace = True
     await hub.start()
+    tune_for_hub()
     try:
         stamps: dict[tuple[str, int], int] = {}
         delivered: dict[tuple[str, int], int] = {}

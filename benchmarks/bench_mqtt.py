@@ -233,11 +233,12 @@ async def latency(broker: Mosquitto, tmp: Path, n_dev: int, seconds: float, imme
     from bench_hub.latency import make_driver_class, press_frames
 
     from wott_hub.examples import example_device
-    from wott_hub.hub import Hub
+    from wott_hub.hub import Hub, tune_for_hub
 
     hub = Hub(hub_config(broker, tmp, history=True, immediate=immediate))
     hub._plane.trace = True
     await hub.start()
+    tune_for_hub()  # what `wott-hub run` does after start-up
     try:
         base = example_device("flat")
         frames = press_frames(base, 240)

@@ -165,7 +165,7 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
     from dataclasses import replace
 
     from wott_hub.config import HubConfig
-    from wott_hub.hub import Hub
+    from wott_hub.hub import Hub, tune_for_hub
 
     from ._hub_internals import example_device, hub_plane, replace_processing
 
@@ -177,6 +177,7 @@ async def latency_ours(n_dev: int, duration: float, tmp: Path, with_wotpy: bool 
     plane = hub_plane(hub)
     plane.trace = True
     await hub.start()
+    tune_for_hub()  # what `wott-hub run` does after start-up
     base = example_device("flat")
     frames = press_frames(base, 240)
     Driver = make_driver_class()

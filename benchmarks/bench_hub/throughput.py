@@ -34,13 +34,14 @@ async def _publish_at(rate: float, duration: float, publish) -> int:
 async def throughput_ours(rate: float, duration: float, tmp: Path) -> dict:
     from wott_hub.config import HubConfig
     from wott_hub.events.record import KIND_EVENT
-    from wott_hub.hub import Hub
+    from wott_hub.hub import Hub, tune_for_hub
     from wott_hub.td.builder import build_tactile_td
 
     from ._hub_internals import example_device, hub_plane, hub_writer
 
     hub = Hub(HubConfig(http_port=0, ws_port=0, database=str(tmp / f"tp{int(rate)}.db")))
     await hub.start()
+    tune_for_hub()  # what `wott-hub run` does after start-up
     td = build_tactile_td(example_device("flat"))
     await hub.expose_thing("bench", td, record=True)
     url = f"{hub.td_url('bench')}/events/skinDeformedDetection"

@@ -113,8 +113,9 @@ class HubConfig:
         "The spool holds at most this many MB; beyond it its oldest records are dropped (and counted)."))
     history_skip: DeviceIds = field(default=(), metadata=doc(
         "Device ids whose events are served live but not recorded."))
-    ring_size: RingSize = field(default=4096, metadata=doc(
-        "Records per Thing kept in memory for SSE resume."))
+    ring_size: RingSize | None = field(default=None, metadata=doc(
+        "Records per Thing kept in memory for SSE resume (older ones are read from history); "
+        "default: 512 for a recorded Thing, 4096 for one that is not (docs/hub.md, Garbage collection)."))
     max_pending: MaxPending = field(default=100_000, metadata=doc(
         "Records a subscriber may fall behind before it is cut off (it resumes with Last-Event-ID)."))
     heartbeat_s: Seconds = field(default=15.0, metadata=doc(

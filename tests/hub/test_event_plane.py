@@ -137,6 +137,34 @@ def test_unrecorded_resume_past_the_ring_reports_the_gap():
     asyncio.run(main())
 
 
+def test_a_recorded_thing_keeps_a_short_ring_and_one_that_is_not_a_long_one():
+    """By default (docs/hub.md, "Garbage collection"): history serves a recorded Thing's older records,
+    nothing serves those of a Thing that is not recorded; a configured size is every Thing's."""
+    from wott_hub.events.plane import RING_RECORDED, RING_UNRECORDED
+
+    plane = EventPlane()
+    hist = ListHistory(plane)
+    plane.history_sink = plane.history_source = hist
+    plane.add_stream("rec", record=True, start_after=0)
+    plane.add_stream("live", record=False, start_after=0)
+    plane.add_stream("later", record=False, start_after=0)
+    plane.continue_after("later", None, record=True)  # told once history is open
+    for i in range(RING_UNRECORDED + 10):
+        for thing in ("rec", "live", "later"):
+            plane.publish(thing, KIND_EVENT, "x", 0, str(i))
+    assert len(plane.stream("rec").ring) == RING_UNRECORDED + 10  # nothing trimmed before history has it
+    plane.on_committed({"rec": RING_UNRECORDED + 10, "later": RING_UNRECORDED + 10})
+    assert RING_RECORDED < RING_UNRECORDED
+    assert len(plane.stream("rec").ring) == len(plane.stream("later").ring) == RING_RECORDED
+    assert len(plane.stream("live").ring) == RING_UNRECORDED
+    assert plane.stream("rec").ring[-1].seq == RING_UNRECORDED + 10  # the newest kept
+
+    sized = EventPlane(ring_size=7)
+    sized.add_stream("rec", record=True)
+    sized.add_stream("live", record=False)
+    assert sized.stream("rec").ring_max == sized.stream("live").ring_max == 7
+
+
 def test_a_subscriber_that_falls_too_far_behind_is_cut_off():
     plane = EventPlane(max_pending=10)
     plane.add_stream("a", record=False)

@@ -26,6 +26,9 @@ from the in-memory ring of recent records when they are still there, else from
 history (waiting, if needed, until the writer has committed them), then the
 live stream continues. The subscriber is registered before the backlog is read,
 so nothing published in between is missed, and seq de-duplicates the overlap.
+A recorded Thing's ring is short (``RING_RECORDED``): history serves what it no
+longer holds, and records that die young never reach the collector's oldest
+generation (docs/hub.md, "Garbage collection").
 """
 
 from __future__ import annotations
@@ -43,9 +46,18 @@ from wott_hub.errors import HistoryError
 from .record import Record, SkinArrays
 from .subscriber import Interest, Subscriber
 
-__all__ = ["DURABILITY", "EventPlane", "HistorySink", "HistorySource", "Stream", "Tap"]
+__all__ = ["DURABILITY", "RING_RECORDED", "RING_UNRECORDED", "EventPlane", "HistorySink", "HistorySource",
+           "Stream", "Tap"]
 
 DURABILITY = ("fast", "committed")
+
+RING_RECORDED = 512
+"""Records a recorded Thing keeps in memory by default (~1.4 s of a 120 Hz skin's three records a
+frame): resumes further back read history. Kept short so that a frame's records die before the
+collector's middle generation is next collected (~3 s at 32 devices x 120 Hz): 4,096 kept them
+~11 s, long enough to fill the oldest generation, whose full collections then took 170 ms."""
+RING_UNRECORDED = 4096
+"""Records a Thing that is not recorded keeps in memory by default: nothing else can serve its resumes."""
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +105,7 @@ class Stream:
     seq: int = 0
     committed: int = 0  # everything <= this is in history (or will never be)
     ring: deque[Record] = field(default_factory=deque)
+    ring_max: int = RING_UNRECORDED  # the plane's ring size for this Thing (it trims down to it)
     held: deque[Record] = field(default_factory=deque)  # durability "committed": not yet delivered
     subs: dict[Interest, list[Subscriber]] = field(default_factory=dict)
     taps: list[Tap] = field(default_factory=list)
@@ -109,12 +122,13 @@ class EventPlane:
 
     max_held = 1_000_000  # per Thing, "committed" mode: beyond, the oldest held are not delivered live
 
-    def __init__(self, *, ring_size: int = 4096, max_pending: int = 100_000,
+    def __init__(self, *, ring_size: int | None = None, max_pending: int = 100_000,
                  durability: str = "fast") -> None:
+        """``ring_size``: records per Thing kept in memory; None: ``RING_RECORDED`` for a recorded
+        Thing, ``RING_UNRECORDED`` for one that is not."""
         self.set_durability(durability)
         self.held_overflow = 0
         self.ring_size = ring_size
-        self.ring_hard_cap = max(ring_size * 16, 65536)
         self.max_pending = max_pending
         # set by the hub once the history database is open
         self.history_sink: HistorySink | None = None
@@ -137,7 +151,7 @@ class EventPlane:
         if thing in self.streams:
             raise ValueError(f"duplicate Thing {thing!r} on the event plane")
         seq = start_after if start_after is not None else time.time_ns() // 1000
-        st = Stream(thing, record, seq=seq, committed=seq)
+        st = Stream(thing, record, seq=seq, committed=seq, ring_max=self._ring_max(record))
         self.streams[thing] = st
         return st
 
@@ -146,9 +160,15 @@ class EventPlane:
         is given, that its sequence continues after it (the last seq history may have handed out)."""
         st = self.stream(thing)
         st.record = record
+        st.ring_max = self._ring_max(record)
         if seq is not None:
             st.seq = st.committed = seq
         return st
+
+    def _ring_max(self, record: bool) -> int:
+        if self.ring_size is not None:
+            return self.ring_size
+        return RING_RECORDED if record else RING_UNRECORDED
 
     def remove_stream(self, thing: str) -> None:
         st = self.streams.pop(thing, None)
@@ -192,7 +212,7 @@ class EventPlane:
         st.counts[rec.name] += 1
         ring = st.ring
         ring.append(rec)
-        if len(ring) > self.ring_size:
+        if len(ring) > st.ring_max:
             self._trim(st)
         if st.record and self.history_sink is not None:
             self.history_sink.submit(rec)
@@ -218,9 +238,12 @@ class EventPlane:
             if tap.active:
                 tap(rec)
 
-    def _trim(self, st: Stream) -> None:
-        ring, committed = st.ring, st.committed
-        while len(ring) > self.ring_size and (ring[0].seq <= committed or len(ring) > self.ring_hard_cap):
+    @staticmethod
+    def _trim(st: Stream) -> None:
+        """Down to ``ring_max``, keeping what history has not committed (up to a hard cap)."""
+        ring, committed, size = st.ring, st.committed, st.ring_max
+        hard_cap = max(size * 16, 65536)
+        while len(ring) > size and (ring[0].seq <= committed or len(ring) > hard_cap):
             ring.popleft()
 
     def on_committed(self, watermarks: dict[str, int]) -> None:
@@ -241,7 +264,7 @@ class EventPlane:
             if failed:
                 for s in [s for s in list(failed) if s <= seq]:
                     failed.discard(s)
-            if len(st.ring) > self.ring_size:
+            if len(st.ring) > st.ring_max:
                 self._trim(st)
             if st._commit_waiters:
                 keep = []

@@ -4,9 +4,10 @@ The package's public names are here (``from wott_hub.hub import Hub, serve``);
 its modules are internal and never import this one (tests/test_architecture.py).
 """
 
+from .collector import tune_for_hub
 from .devices import DeviceRuntime
 from .lifecycle import Hub
 from .replay import ReplayRuntime
 from .serve import serve
 
-__all__ = ["DeviceRuntime", "Hub", "ReplayRuntime", "serve"]
+__all__ = ["DeviceRuntime", "Hub", "ReplayRuntime", "serve", "tune_for_hub"]

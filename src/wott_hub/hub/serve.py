@@ -35,6 +35,7 @@ from typing import Any
 
 from wott_hub.config import HubConfig
 
+from .collector import tune_for_hub
 from .lifecycle import Hub
 
 __all__ = ["COALESCE_S", "EXIT_S", "HURRY_S", "STOP_S", "serve"]
@@ -74,6 +75,7 @@ async def serve(config: HubConfig, *, ready: Callable[[Hub], None] | None = None
         hub = Hub(config, extra_handlers=extra_handlers)
         signals.hub = hub
         if await signals.until_stop(hub.start()):
+            tune_for_hub()
             if ready is not None:
                 ready(hub)
             await signals.until_stop(None)
