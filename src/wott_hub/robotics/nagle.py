@@ -21,7 +21,7 @@ import os
 import socket
 from pathlib import Path
 
-__all__ = ["disable_nagle"]
+__all__ = ["ESTABLISHED", "LISTEN", "descriptors", "disable_nagle"]
 
 LISTEN, ESTABLISHED = "0A", "01"  # the kernel's TCP states as /proc/net/tcp writes them
 
