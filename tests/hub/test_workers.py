@@ -183,3 +183,46 @@ def test_a_lone_frame_goes_out_on_the_next_loop_tick_not_after_flush_s():
     got, messages, _ = _through_the_pipe(work, flush_s=5.0)
     assert messages == 2
     assert got[0] == ("recs", "b", [(KIND_PROPERTY, "contactInformation", 1, "{}", None, None)])
+
+
+def test_an_open_never_waits_for_a_worker_that_exited():
+    """A worker process that exits while a device is opening in it fails that open (``WorkerDied``:
+    it used to wait for ever); later opens go to a worker still running, and fail at once when
+    none is."""
+    import pytest
+
+    from wott_hub.errors import DriverError, WorkerDied
+    from wott_hub.runtime.pool import WorkerPool
+
+    class Heard:
+        def __init__(self) -> None:
+            self.exited: list[int] = []
+
+        def on_worker_exit(self, worker) -> None:
+            self.exited.append(worker)
+
+    async def main() -> None:
+        heard = Heard()
+        pool = WorkerPool(2, heard)
+        try:
+            opening = asyncio.create_task(pool.open(DeviceConfig("pad", "scene", {"shape": "flat"})))
+            await asyncio.sleep(0)  # sent to worker 0, which is still starting (a spawned interpreter)
+            pool.procs[0].kill()
+            with pytest.raises(WorkerDied):
+                await asyncio.wait_for(opening, 30)
+            assert heard.exited == [0] and not pool._pending
+            # the next opens go to worker 1: it answers (here: the scene has no steps, a DriverError)
+            for _ in range(2):
+                with pytest.raises(DriverError, match="step") as e:
+                    await asyncio.wait_for(pool.open(DeviceConfig("x", "scene", {"shape": "flat"})), 60)
+                assert not isinstance(e.value, WorkerDied)
+            pool.procs[1].kill()
+            deadline = time.monotonic() + 30
+            while heard.exited != [0, 1] and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)
+            with pytest.raises(WorkerDied, match="every worker process has exited"):
+                await asyncio.wait_for(pool.open(DeviceConfig("y", "scene", {"shape": "flat"})), 1)
+        finally:
+            await pool.close()
+
+    asyncio.run(main())

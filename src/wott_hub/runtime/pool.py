@@ -1,7 +1,8 @@
 """The hub's end of the worker processes: the pool, and a proxy for each device opened in one.
 
 ``WorkerPool`` starts ``[hub] workers`` processes (``worker.worker_main``),
-opens each device in the next one (round robin) and reads what they send
+opens each device in the next one still running (round robin; ``WorkerDied``
+when none is, or when its worker exits before the device is open) and reads what they send
 (``messages``): the answers it waits for itself (``Opened``/``OpenFailed``,
 ``Acted``), the rest handed to the hub (``WorkerEvents``), a batch of records
 frame by frame. The hub sees a device opened in a worker through a
@@ -20,7 +21,7 @@ import asyncio
 import contextlib
 import multiprocessing as mp
 import time
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from wott_hub import errors
 from wott_hub.drivers.base import Health, HealthStatus
@@ -134,7 +135,7 @@ class WorkerPool:
         self.events = events
         self.procs: list[mp.process.BaseProcess] = []
         self.conns: list[mp.connection.Connection] = []
-        self._pending: dict[str, asyncio.Future[Opened]] = {}
+        self._pending: dict[str, tuple[int, asyncio.Future[Opened]]] = {}  # device -> (worker, answer)
         self._requests: dict[int, tuple[int, asyncio.Future[Acted]]] = {}  # -> (worker, answer)
         self._samples: dict[int, tuple[int, asyncio.Future[Sampled]]] = {}  # the same, for Sample
         self._next = 0
@@ -156,13 +157,22 @@ class WorkerPool:
             self.conns[worker].send(msg)
 
     async def open(self, cfg: DeviceConfig) -> tuple[WorkerDevice, str]:
-        """Open ``cfg`` (a ``DeviceConfig``) in the next worker; (proxy, family) or DriverError."""
-        worker = self._next % len(self.conns)
+        """Open ``cfg`` (a ``DeviceConfig``) in the next worker still running; (proxy, family), or
+        ``DriverError`` (``WorkerDied`` if no worker runs, or if it exits before answering: a device
+        is never left waiting for the answer of a process that is gone)."""
+        live = [i for i in range(len(self.conns)) if i not in self._gone]
+        if not live:
+            raise WorkerDied(f"device {cfg.id!r}: every worker process has exited")
+        worker = live[self._next % len(live)]
         self._next += 1
-        fut = self._loop.create_future()
-        self._pending[cfg.id] = fut
+        fut: asyncio.Future[Opened] = self._loop.create_future()
+        self._pending[cfg.id] = (worker, fut)
         self.send(worker, Open(cfg))
-        opened = await fut
+        try:
+            opened = await fut
+        finally:
+            if self._pending.get(cfg.id, (None, None))[1] is fut:
+                del self._pending[cfg.id]
         proxy = WorkerDevice(cfg.id, opened.description, self, worker, opened.capabilities,
                              opened.raw_signals)
         return proxy, opened.family
@@ -227,8 +237,8 @@ class WorkerPool:
 
     def _worker_gone(self, worker: int) -> None:
         self._gone.add(worker)
-        waiting: list[tuple[int, asyncio.Future[Acted]] | tuple[int, asyncio.Future[Sampled]]] = [
-            *self._requests.values(), *self._samples.values()]
+        waiting: list[tuple[int, asyncio.Future[Any]]] = [
+            *self._requests.values(), *self._samples.values(), *self._pending.values()]
         for w, fut in waiting:
             if w == worker and not fut.done():
                 fut.set_exception(WorkerDied("the device's worker process exited before answering"))
@@ -260,14 +270,14 @@ class WorkerPool:
                     entry[1].set_result(msg)
             elif isinstance(msg, Ended):
                 events.on_ended(msg.device, msg.reason)
-            elif isinstance(msg, Opened):
-                fut = self._pending.pop(msg.device, None)
-                if fut is not None and not fut.done():
-                    fut.set_result(msg)
-            elif isinstance(msg, OpenFailed) and msg.device in self._pending:
-                fut = self._pending.pop(msg.device)
-                if not fut.done():
-                    fut.set_exception(DriverError(msg.message))
+            elif isinstance(msg, Opened | OpenFailed):
+                opening = self._pending.pop(msg.device, None)
+                if opening is None or opening[1].done():
+                    continue
+                if isinstance(msg, Opened):
+                    opening[1].set_result(msg)
+                else:
+                    opening[1].set_exception(DriverError(msg.message))
 
     async def close(self, timeout_s: float = 10.0) -> None:
         for i, conn in enumerate(self.conns):
