@@ -242,8 +242,7 @@ class EventPlane:
     def _trim(st: Stream) -> None:
         """Down to ``ring_max``, keeping what history has not committed (up to a hard cap)."""
         ring, committed, size = st.ring, st.committed, st.ring_max
-        hard_cap = max(size * 16, 65536)
-        while len(ring) > size and (ring[0].seq <= committed or len(ring) > hard_cap):
+        while len(ring) > size and (ring[0].seq <= committed or len(ring) > max(size * 16, 65536)):
             ring.popleft()
 
     def on_committed(self, watermarks: dict[str, int]) -> None:

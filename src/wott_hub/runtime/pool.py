@@ -171,7 +171,7 @@ class WorkerPool:
         try:
             opened = await fut
         finally:
-            if self._pending.get(cfg.id, (None, None))[1] is fut:
+            if self._pending.get(cfg.id) == (worker, fut):  # not answered: failed or cancelled
                 del self._pending[cfg.id]
         proxy = WorkerDevice(cfg.id, opened.description, self, worker, opened.capabilities,
                              opened.raw_signals)
