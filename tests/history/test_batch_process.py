@@ -169,3 +169,46 @@ def test_a_backlog_is_written_by_the_writers_thread_until_the_writer_keeps_up(tm
     with engine.connect() as conn:
         assert [r[0] for r in conn.exec_driver_sql("SELECT seq FROM events ORDER BY id")] == \
             list(range(start + 1, start + 30_001))
+
+
+def test_a_writer_that_keeps_up_writes_what_came_in_meanwhile_at_its_next_wake(tmp_path):
+    """``_BEHIND``: records that arrive while a batch is written wait for the next wake (one batch per
+    ``interval_s``, not one per write: each batch has fixed costs); a batch larger than a message
+    (``_SLICE``) crosses in parts and is written whole."""
+    engine = create_engine(database_url(tmp_path / "h.db"))
+    upgrade(engine)
+    w = HistoryWriter(engine, interval_s=60.0, process=True)  # woken by the flush below only
+    start = w.register_thing("d")
+    seq = iter(range(start + 1, start + 1_000))
+
+    def submit(n: int) -> None:
+        for _ in range(n):
+            s = next(seq)
+            w.submit(Record("d", s, KIND_EVENT, "tick", 10**18 + s, str(s)))
+
+    submit(300)  # more than a message carries
+    process = w._process
+    sizes: list[int] = []
+    write = process.write
+
+    def writing(records, *a):
+        if not sizes:
+            submit(50)  # arriving while the first batch is written
+        sizes.append(len(records))
+        write(records, *a)
+
+    process.write = writing
+    w.start()
+    try:
+        deadline = time.monotonic() + 30
+        while w.batches < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.3)
+        assert (w.batches, w.written, w.queue_depth) == (1, 300, 50)  # the 50 wait for the next wake
+        assert w.flush(30)
+    finally:
+        w.stop()
+    assert sizes == [300, 50] and w.written == 350
+    with engine.connect() as conn:
+        assert [r[0] for r in conn.exec_driver_sql("SELECT seq FROM events ORDER BY id")] == \
+            list(range(start + 1, start + 351))

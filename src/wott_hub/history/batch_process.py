@@ -55,6 +55,13 @@ with ``data`` None unless its text was already written: history packs the number
 needs the text."""
 
 
+_SLICE = 128
+"""Records a message carries: a batch crosses as "part" messages and a last "write". The writer's
+thread holds the GIL while it pickles a message (~1.5 µs a record) and lets it go at each send, so
+the event loop waits for it ~0.2 ms at most, not the whole batch's ~1 ms (or the interpreter's
+5 ms switch interval)."""
+
+
 class BatchProcess:
     """The writer thread's handle on the process: started when the thread starts, again after it exits.
     ``url``: the database (sent over the pipe, never in argv); ``compact``: as the writer's storage."""
@@ -73,18 +80,30 @@ class BatchProcess:
     def write(self, records: Sequence[Record], keys: Mapping[str, int], reserve: Mapping[str, int]) -> None:
         """Write ``records`` and move ``reserve`` in one transaction, as ``StorageWriter.write``
         does: ``RecordRefused``, or ``HistoryError`` for anything else (the process gone too)."""
-        answer = self._ask(("write", fields_of(records), dict(keys), dict(reserve)))
+        last = max(0, len(records) - 1) // _SLICE * _SLICE
+        for i in range(0, last, _SLICE):  # the GIL is let go at each send: the event loop runs between
+            self._tell(("part", fields_of(records[i:i + _SLICE])))
+        answer = self._ask(("write", fields_of(records[last:]), dict(keys), dict(reserve)))
         if answer[0] == "refused":
             raise RecordRefused(answer[1])
         if answer[0] != "ok":
             raise HistoryError(answer[1])
 
-    def _ask(self, msg: tuple[Any, ...]) -> tuple[Any, ...]:
+    def _tell(self, msg: tuple[Any, ...]) -> None:
+        """Send ``msg``, which has no answer."""
         if self._to is None:
             self.start()
-        assert self._to is not None and self._from is not None
+        assert self._to is not None
         try:
             self._to.send(msg)
+        except OSError as e:
+            code = self._reap()
+            raise HistoryError(f"the history process exited ({code}) before answering: {e!r}") from None
+
+    def _ask(self, msg: tuple[Any, ...]) -> tuple[Any, ...]:
+        self._tell(msg)
+        assert self._from is not None
+        try:
             answer: tuple[Any, ...] = self._from.recv()
         except (EOFError, OSError) as e:
             code = self._reap()
@@ -178,11 +197,17 @@ def main(read_fd: int, write_fd: int) -> None:
         outbox.send(("error", f"the history process cannot open the database: {driver_message(e)}"))
         return
     outbox.send(("ok",))
+    parts: list[Fields] = []
     while True:
         try:
-            _, fields, keys, reserve = inbox.recv()
+            msg = inbox.recv()
         except EOFError:  # the writer stopped, or the hub is gone
             break
+        if msg[0] == "part":
+            parts += msg[1]
+            continue
+        _, fields, keys, reserve = msg
+        fields, parts = parts + fields, []
         storage.keys.update(keys)
         try:
             storage.write(storage.prepare(records_of(fields)), reserve)
