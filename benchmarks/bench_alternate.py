@@ -5,7 +5,9 @@ checkout, and the machine drifts by more than the differences sought from one in
 next. Here each run is a process of its own in its checkout (``DIR/.venv``, made by ``uv sync``),
 running that checkout's own ``bench_hub.latency.latency_ours`` (the hub, the devices and the clients
 as `bench hub` runs them, SSE and WebSocket phases, no wotpy client) after a 2 s warm-up run; the
-checkouts take turns, ``--rounds`` times, and the medians are printed. Printed only: the numbers go
+checkouts take turns, ``--rounds`` times, and the medians are printed. The hub's CPU per frame is
+printed as measured and less the simulated devices' own (``latency.devices_own``; measured by this
+checkout for one that does not). Printed only: the numbers go
 into docs/benchmarks.md by hand, with the checkouts' commits.
 
     uv run wott-hub bench alternate ../before . --devices 32 --rounds 4
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import subprocess
 import sys
@@ -33,12 +36,14 @@ async def main(n, dur):
     fps = r["sse"][0] / dur  # cpu_us: latency.cpu_per_frame, written out (older checkouts lack it)
     print(json.dumps({"fps": fps, "sse_p99": r["sse"][3] / 1e6, "ws_p99": r["ws"][3] / 1e6,
                       "cpu_us": 1e4 * r["cpu"]["sse-lean"][0] / max(1.0, fps),
-                      "stages_p99": {k: v[1] / 1e6 for k, v in r["stages"].items()}}))
+                      "stages_p99": {k: v[1] / 1e6 for k, v in r["stages"].items()},
+                      "devices_us": r.get("devices_us", float("nan"))}))
 asyncio.run(main(int(sys.argv[1]), float(sys.argv[2])))
 """
 
 _COLUMNS = (("fps", "frames/s", "{:.0f}"), ("sse_p99", "SSE p99 ms", "{:.2f}"),
-            ("ws_p99", "WS p99 ms", "{:.2f}"), ("cpu_us", "hub CPU µs/frame", "{:.0f}"))
+            ("ws_p99", "WS p99 ms", "{:.2f}"), ("cpu_us", "hub CPU µs/frame", "{:.0f}"),
+            ("own_us", "less the devices' own", "{:.0f}"))
 
 
 def _checkout(text: str) -> Path:
@@ -64,6 +69,16 @@ def _run(path: Path, devices: int, duration: float) -> dict:
     return result
 
 
+def _devices_own(devices: int) -> float:
+    """``bench_hub.latency.devices_own`` of this checkout (the same simulated devices as older ones)."""
+    code = ("import asyncio, sys; sys.path.insert(0, 'benchmarks'); from bench_hub import latency as L; "
+            f"print(asyncio.run(L.devices_own({devices})))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    if done.returncode != 0:
+        raise SystemExit(f"the devices' own cost could not be measured: {done.stderr.strip()[-2000:]}")
+    return float(done.stdout.strip().splitlines()[-1])
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="wott-hub bench alternate", description=__doc__.split("\n\n")[0])
     ap.add_argument("checkouts", nargs="+", type=_checkout, metavar="DIR")
@@ -75,9 +90,13 @@ def main(argv: list[str] | None = None) -> None:
         ap.error("--devices and --rounds must be at least 1, --duration positive")
     names = [f"{_commit(p)} ({p.name})" for p in args.checkouts]
     runs: dict[str, list[dict]] = {name: [] for name in names}
+    devices = _devices_own(args.devices)  # for checkouts whose benchmark does not measure it
     for k in range(args.rounds):
         for name, path in zip(names, args.checkouts, strict=True):
             r = _run(path, args.devices, args.duration)
+            if r.get("devices_us") is None or math.isnan(r["devices_us"]):  # a checkout older than it
+                r["devices_us"] = devices
+            r["own_us"] = r["cpu_us"] - r["devices_us"]
             runs[name].append(r)
             cells = " · ".join(f"{label} {fmt.format(r[key])}" for key, label, fmt in _COLUMNS)
             stages = ", ".join(f"{stage} {p99:.2f}" for stage, p99 in r["stages_p99"].items())

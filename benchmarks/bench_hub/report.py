@@ -36,14 +36,16 @@ def latency(res: dict) -> str:
         + ", ".join(ms(x) for x in sse) + " ms; hub WS p99 " + ", ".join(ms(x) for x in ws)
         + " ms; frames/s processed " + ", ".join(f"{x:.0f}" for x in fps)
         + f" (median {statistics.median(fps):.0f}); hub CPU per frame " + ", ".join(f"{x:.0f}" for x in cpu)
-        + f" µs (median {statistics.median(cpu):.0f})."
-        for n, sse, ws, fps, cpu in res["repeats"])
+        + f" µs (median {statistics.median(cpu):.0f}), less the simulated devices' own "
+        + ", ".join(f"{x:.0f}" for x in own) + f" µs (median {statistics.median(own):.0f})."
+        for n, sse, ws, fps, cpu, own in res["repeats"])
     out = (
         f"### Latency: a frame enters the pipeline -> its event at a client (ms, p50 / p99; "
         f"{res['duration']:g} s per point)\n\n"
         + markdown_table(["devices", "frames/s processed / offered", "hub SSE", "hub WS",
                           "hub WS, wotpy client", "plain wotpy WS, wotpy client",
-                          "CPU % of a core, hub / client", "hub CPU µs per frame"], res["rows"])
+                          "CPU % of a core, hub / client",
+                          "hub CPU µs per frame · less the devices' own"], res["rows"])
         + repeats
         + "\n\nStages (ms, p50 / p99):\n\n"
         + markdown_table(["devices", "processing", "encoding", "SSE fan-out", "SSE transport",
@@ -53,7 +55,7 @@ def latency(res: dict) -> str:
         out += ("\n\nVariants: `workers = N`, `processing precomputed` (ms, p50 / p99):\n\n"
                 + markdown_table(["devices", "variant", "frames/s", "hub SSE", "hub WS", "processing",
                                   "SSE fan-out", "SSE transport", "CPU % of a core, hub / client",
-                                  "hub CPU µs per frame"],
+                                  "hub CPU µs per frame · less the devices' own"],
                                  res["variant_rows"]))
     if res.get("ab_rows"):
         out += ("\n\nOne `skinDisplacement` subscriber per device (issue 29; SSE, its JSON text), three runs "
