@@ -55,11 +55,12 @@ with ``data`` None unless its text was already written: history packs the number
 needs the text."""
 
 
-_SLICE = 128
+_SLICE = 32
 """Records a message carries: a batch crosses as "part" messages and a last "write". The writer's
-thread holds the GIL while it pickles a message (~1.5 µs a record) and lets it go at each send, so
-the event loop waits for it ~0.2 ms at most, not the whole batch's ~1 ms (or the interpreter's
-5 ms switch interval)."""
+thread holds the GIL while it makes and pickles a message (~1.5 µs a record) and lets it go at each
+send, so the event loop waits ~50 µs for it at most, not the whole batch's ~1.5 ms (or the
+interpreter's 5 ms switch interval). Measured at 32 devices: the SSE fan-out's p99 0.23-0.25 ms
+with 32 records a message, 0.31-0.34 with 128 (0.22-0.27 before batches grew to a whole interval)."""
 
 
 class BatchProcess:
