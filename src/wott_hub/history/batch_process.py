@@ -12,8 +12,9 @@ A backlog (``writer._CATCH_UP``) the thread writes itself: handing over costs ~8
 more than catching up can spare.
 
 Protocol: two pipes of pickled messages (``multiprocessing.connection`` framing), strictly
-request then answer. Writer -> process: ``("open", url, compact)`` once, then ``("write",
-records, keys, reserve)`` (``records``: the batch's ``Record``s as tuples of their fields
+request then answer. Writer -> process: ``("open", url, compact)`` once, then per batch any number of
+``("part", records)`` (no answer: the process keeps them) and one ``("write", records, keys,
+reserve)`` (``records``: the batch's ``Record``s, the parts' first, as tuples of their fields
 (``Fields``), which the process makes ``Record``s again; ``keys``: the database key of each of
 their Things; ``reserve``: Thing -> ``seq_reserved`` to set in the same transaction).
 Process -> writer: ``("ok",)``, ``("refused", message)`` (``RecordRefused``: the writer
