@@ -132,7 +132,7 @@ def _end_process() -> None:
     Why: the hub's stop has written history, closed every connection and ended its child
     processes; what the teardown adds is the native libraries' own (onnxruntime, OpenCV, loaded by
     device plugins) destructors, and one of them aborted the process now and then ("terminate
-    called without an active exception", exit -6, ~1 in 10-20 stops of the demo under CPU load):
+    called without an active exception", exit -6; once in 30 stops of the demo under CPU load here):
     a clean stop reported as a crash. So the output is flushed, logging shut down, and the process
     exits 0 as the stop did."""
     import logging
