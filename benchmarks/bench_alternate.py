@@ -90,11 +90,13 @@ def main(argv: list[str] | None = None) -> None:
         ap.error("--devices and --rounds must be at least 1, --duration positive")
     names = [f"{_commit(p)} ({p.name})" for p in args.checkouts]
     runs: dict[str, list[dict]] = {name: [] for name in names}
-    devices = _devices_own(args.devices)  # for checkouts whose benchmark does not measure it
+    devices: float | None = None  # for checkouts whose benchmark does not measure it, when one runs
     for k in range(args.rounds):
         for name, path in zip(names, args.checkouts, strict=True):
             r = _run(path, args.devices, args.duration)
             if r.get("devices_us") is None or math.isnan(r["devices_us"]):  # a checkout older than it
+                if devices is None:
+                    devices = _devices_own(args.devices)
                 r["devices_us"] = devices
             r["own_us"] = r["cpu_us"] - r["devices_us"]
             runs[name].append(r)

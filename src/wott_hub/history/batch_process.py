@@ -99,8 +99,7 @@ class BatchProcess:
         try:
             self._to.send(msg)
         except OSError as e:
-            code = self._reap()
-            raise HistoryError(f"the history process exited ({code}) before answering: {e!r}") from None
+            raise self._gone(e) from None
 
     def _ask(self, msg: tuple[Any, ...]) -> tuple[Any, ...]:
         self._tell(msg)
@@ -108,9 +107,12 @@ class BatchProcess:
         try:
             answer: tuple[Any, ...] = self._from.recv()
         except (EOFError, OSError) as e:
-            code = self._reap()
-            raise HistoryError(f"the history process exited ({code}) before answering: {e!r}") from None
+            raise self._gone(e) from None
         return answer
+
+    def _gone(self, e: BaseException) -> HistoryError:
+        """The process, whose pipe failed with ``e``, reaped: the error to raise."""
+        return HistoryError(f"the history process exited ({self._reap()}) before answering: {e!r}")
 
     def start(self) -> None:
         """Start the process and have it open the database (the writer thread does, before its first

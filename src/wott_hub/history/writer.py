@@ -95,8 +95,8 @@ _BEHIND = 2_000
 """Records waiting after a batch from which the writer writes the next one at once rather than
 at its next wake (``interval_s``). Below that it is keeping up, and a batch of what arrived while
 the last one was written (~65 records at 32 devices x 120 Hz) would cost the batch process ~3x
-as much a record as one wake's worth (~1,150 at 100 ms): encoding a batch and committing it have fixed costs
-(measured: 96 against 31 µs of the process's CPU a frame; docs/history.md)."""
+as much a record as one wake's worth (~1,150 at 100 ms): encoding a batch and committing it have
+fixed costs (measured: 96 against 31 µs of the process's CPU a frame; docs/history.md)."""
 _HURRY_S = 1.0
 """After ``hurry``, how long ``stop`` still waits for the database before it spools and returns."""
 _FORWARD_SLICE_S = 1.0
