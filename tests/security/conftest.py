@@ -1,10 +1,11 @@
 """A client that is not on loopback: a network namespace joined to the host by a veth pair.
 
 The namespace and both ends of the pair are made by the fixture (root is available
-in CI) and removed after the tests: addresses in 10.231.0.0/30, traffic only between
-the host end (the hub binds it) and the namespace (the clients run there with
-``ip netns exec``). The hub is the real ``wott-hub run`` in a subprocess, so its
-start-up refusal, its logs and its history database are the ones a user gets.
+in CI) and removed after the tests: addresses in 10.231.k.0/30 (k: the pytest-xdist worker's
+number, so that workers running at once never share a subnet), traffic only between the host
+end (the hub binds it) and the namespace (the clients run there with ``ip netns exec``). The
+hub is the real ``wott-hub run`` in a subprocess, so its start-up refusal, its logs and its
+history database are the ones a user gets.
 """
 
 from __future__ import annotations
@@ -20,8 +21,10 @@ from pathlib import Path
 import pytest
 
 HERE = Path(__file__).resolve().parent
-HOST_IP = "10.231.0.1"
-NS_IP = "10.231.0.2"
+WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
+"""This process's pytest-xdist worker (0 without xdist): its subnet and its namespace's name."""
+HOST_IP = f"10.231.{WORKER}.1"
+NS_IP = f"10.231.{WORKER}.2"
 WOTT_HUB = str(Path(sys.executable).with_name("wott-hub"))
 
 
@@ -30,13 +33,22 @@ def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
 
 
 def _remove_stale() -> None:
-    """Namespaces of a test run that was killed before its clean-up: their host end holds HOST_IP,
-    and the kernel would route this run's packets to it (every request from the namespace fails)."""
+    """Namespaces of a test run that was killed before its clean-up: their host end holds an address
+    this run may need, and the kernel would route this run's packets to it (every request from the
+    namespace fails). A name is ``wottsec<run>x<worker>``; the run's own are left to its workers."""
     for line in _ip("netns", "list", check=False).stdout.splitlines():
         name = line.split()[0] if line.strip() else ""
-        if name.startswith("wottsec") and name[7:].isdigit() and not _alive(int(name[7:])):
+        run, _, worker = name[7:].partition("x")
+        ours = name.startswith("wottsec") and run.isdigit() and (worker.isdigit() or not worker)
+        if ours and not _alive(int(run)):
             _ip("link", "del", f"wsh{name[7:]}", check=False)
             _ip("netns", "del", name, check=False)
+
+
+def _run_tag() -> int:
+    """The pytest run's pid modulo 100,000: the controller's under pytest-xdist (a worker's own command
+    line does not say pytest), else this process's."""
+    return (os.getppid() if "PYTEST_XDIST_WORKER" in os.environ else os.getpid()) % 100000
 
 
 def _alive(tag: int) -> bool:
@@ -56,7 +68,7 @@ def netns():
     Session-scoped: made once however a shuffled order interleaves this package with others."""
     assert shutil.which("ip"), "iproute2 is needed (apt-get install iproute2)"
     _remove_stale()
-    tag = f"{os.getpid() % 100000}"
+    tag = f"{_run_tag()}x{WORKER}"
     ns, host_if, ns_if = f"wottsec{tag}", f"wsh{tag}", f"wsn{tag}"
     _ip("netns", "add", ns)
     try:

@@ -18,7 +18,7 @@ import pytest
 from wott_hub.security import Scope, TokenFile
 from wott_hub.security.tls import write_selfsigned
 
-from .conftest import WOTT_HUB, HubProcess, in_ns, wait_for
+from .conftest import NS_IP, WOTT_HUB, HubProcess, in_ns, wait_for
 
 ORIGIN = "http://lab.example:3000"
 
@@ -275,7 +275,7 @@ def test_audit_trail_and_no_secret_in_logs_or_history(netns, hub, tokens):
                            for r in rows) else None
 
     rows = wait_for(audited, 10)
-    assert any(r["who"] == "-" and r["status"] == 401 and r["address"] == "10.231.0.2" for r in rows)
+    assert any(r["who"] == "-" and r["status"] == 401 and r["address"] == NS_IP for r in rows)
     assert any(r["who"] == "read-client" and r["status"] == 403 and r["action"] == "POST" for r in rows)
     assert any(r["who"] == "admin-client" and r["action"] == "PUT" and r["status"] == 201 for r in rows)
     assert any(r["who"] == "control-client" and r["target"] == "/wot/hub/actions/replay"
@@ -332,7 +332,7 @@ def test_a_non_loopback_hub_without_credentials_refuses_to_start_unless_insecure
     assert out.returncode == 2
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1
-    assert lines[0].startswith("error: refusing to listen on 10.231.0.1 without credentials")
+    assert lines[0].startswith(f"error: refusing to listen on {netns[1]} without credentials")
     assert "wott-hub tokens create" in lines[0] and "--insecure" in lines[0]
     hub = HubProcess(["--host", netns[1], "--port", "0", "--ws-port", "0", "--no-history", "--insecure"],
                      tmp_path)
