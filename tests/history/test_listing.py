@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sqlalchemy as sa
 
+from wott_hub.events.record import KIND_EVENT, Record
 from wott_hub.history.models import EventRow
 
 
@@ -57,3 +58,19 @@ def test_the_first_page_of_a_range_is_small_and_the_rest_follow_in_order(writer,
     pages = list(reader.pages("d", page=FIRST_PAGE * 2))
     assert [len(p) for p in pages] == [FIRST_PAGE, FIRST_PAGE * 2, 7]
     assert [r.seq for p in pages for r in p] == [r.seq for r in recs]
+
+
+def test_a_record_stamped_before_its_predecessor_is_read_without_bounds(writer, reader, make_records):
+    """A raw image is published once encoded, stamped with its frame's time: after records of later
+    frames. The reader's seq range once came from the earliest and latest time, and left it out."""
+    start = writer.register_thing("cam")
+    writer.start()
+    recs = make_records("cam", start, 4)
+    late = Record("cam", start + 5, KIND_EVENT, "rawImageRecorded", recs[0].t_ns + 1, '{"camera":"camera"}')
+    for r in [*recs, late]:
+        writer.submit(r)
+    assert writer.flush(30)
+    assert [r.seq for r in reader.record_page("cam")] == [*(r.seq for r in recs), late.seq]
+    assert [r.seq for r in reader.record_page("cam", names=["rawImageRecorded"])] == [late.seq]
+    assert [r.seq for p in reader.pages("cam") for r in p] == [*(r.seq for r in recs), late.seq]
+    assert reader.seq_range("cam") == (recs[0].seq, late.seq)

@@ -221,19 +221,31 @@ class HistoryReader:
     @_guarded
     def seq_range(self, thing: str, t_from_ns: int | None = None,
                   t_to_ns: int | None = None) -> tuple[int, int] | None:
-        """First and last seq of ``thing`` within [t_from, t_to]; None if nothing is there."""
+        """First and last seq of ``thing`` within [t_from, t_to]; None if nothing is there.
+
+        An open side is the end of the seq index, not the seq of the earliest or latest time: a
+        Thing's records are numbered as they are published, but stamped with the time of what
+        they describe, and that can go back (a ``rawImageRecorded`` event carries its frame's
+        time and is published once encoded, after records of later frames). The latest record
+        by time was then not the last one, and a read without bounds left the image out. A
+        bounded side is still found by the time index (one index step, not a scan of the range):
+        a record stamped before records published ahead of it can fall outside a bounded range's
+        seqs at that side (docs/history.md, "Reading by time")."""
         key = self.key(thing)
         if key is None:
             return None
         with self.engine.connect() as conn:
-            q0 = sa.select(_E.c.seq).where(_E.c.thing_key == key)
-            q1 = q0
-            if t_from_ns is not None:
-                q0 = q0.where(_E.c.t_ns >= t_from_ns)
-            if t_to_ns is not None:
-                q1 = q1.where(_E.c.t_ns <= t_to_ns)
-            lo = conn.execute(q0.order_by(_E.c.t_ns, _E.c.seq).limit(1)).scalar()
-            hi = conn.execute(q1.order_by(_E.c.t_ns.desc(), _E.c.seq.desc()).limit(1)).scalar()
+            q = sa.select(_E.c.seq).where(_E.c.thing_key == key)
+            if t_from_ns is None:
+                q0 = q.order_by(_E.c.seq)
+            else:
+                q0 = q.where(_E.c.t_ns >= t_from_ns).order_by(_E.c.t_ns, _E.c.seq)
+            if t_to_ns is None:
+                q1 = q.order_by(_E.c.seq.desc())
+            else:
+                q1 = q.where(_E.c.t_ns <= t_to_ns).order_by(_E.c.t_ns.desc(), _E.c.seq.desc())
+            lo = conn.execute(q0.limit(1)).scalar()
+            hi = conn.execute(q1.limit(1)).scalar()
         if lo is None or hi is None or lo > hi:
             return None
         return lo, hi
