@@ -164,10 +164,15 @@ def test_td_validate_a_served_td_by_url_and_from_stdin(cli, demo):
 
 
 def test_discover_at_80_columns_keeps_whole_urls(cli, demo):
-    res = cli("discover", "--interface", "127.0.0.1", "--timeout", "4", timeout=120)
-    assert res.returncode == 0, res.stderr
-    for url in (demo.devices[d] for d in DEMO):  # the demo's (other hubs may announce on loopback too)
-        assert re.search(rf"^\S+\s+{re.escape(url)}(\s|$)", res.stdout, re.M), res.stdout
+    def listed(out: str) -> bool:  # the demo's (other hubs may announce on loopback too)
+        return all(re.search(rf"^\S+\s+{re.escape(demo.devices[d])}(\s|$)", out, re.M) for d in DEMO)
+
+    for _ in range(4):  # again if a loaded machine (another worker's mDNS too) missed one in the window
+        res = cli("discover", "--interface", "127.0.0.1", "--timeout", "4", timeout=120)
+        assert res.returncode == 0, res.stderr
+        if listed(res.stdout):
+            break
+    assert listed(res.stdout), res.stdout
 
 
 def test_plugins_list_and_families_at_80_columns(cli):

@@ -42,12 +42,18 @@ def test_announced_records_carry_the_scheme_the_hub_serves(tmp_path, run, tls):
         await hub.start()
         try:
             assert hub.http_url.startswith(f"{scheme}://")
-            discover = await asyncio.create_subprocess_exec(
-                str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "2", "--json",
-                stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-            out, err = await asyncio.wait_for(discover.communicate(), 60)
-            assert discover.returncode == 0, err.decode()
-            rows = {r["name"]: r for r in json.loads(out)}
+            names = {f"scheme-test {hub.hub_id}", f"hub on scheme-test {hub.hub_id}"}
+            rows: dict[str, dict] = {}
+            for _ in range(5):  # a loaded machine (another worker's mDNS too) can miss one in a browse
+                discover = await asyncio.create_subprocess_exec(
+                    str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "2", "--json",
+                    stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+                out, err = await asyncio.wait_for(discover.communicate(), 60)
+                assert discover.returncode == 0, err.decode()
+                rows = {r["name"]: r for r in json.loads(out)}
+                if names <= rows.keys():
+                    break
+            assert names <= rows.keys(), f"browsed 5 times, found {sorted(rows)}"
             directory = rows[f"scheme-test {hub.hub_id}"]
             assert directory["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": scheme}
             thing = rows[f"hub on scheme-test {hub.hub_id}"]
