@@ -4,6 +4,12 @@
 registered here as a plugin, so ``tests/`` and ``directory/tests/`` (its own distribution)
 use one cluster per session. It is loaded by path: with ``--import-mode=importlib`` the
 test folders are not packages on ``sys.path``.
+
+pytest-xdist runs the suite on a few workers (``--dist loadgroup``, pyproject.toml): each file is
+one group, run whole on one worker in its order, except the files marked
+``xdist_group("mdns")``, which share one group. Those announce tactile devices on loopback mDNS
+(the same instance names, some of them) or assert what a browsing hub adopted: run at the same
+time on two workers they see each other's devices (docs/testing.md).
 """
 
 from __future__ import annotations
@@ -11,6 +17,8 @@ from __future__ import annotations
 import importlib.util
 import sys
 from pathlib import Path
+
+import pytest
 
 _NAME = "wott_tests_postgres"
 
@@ -29,3 +37,10 @@ def _load_postgres_plugin():
 def pytest_configure(config) -> None:
     if not config.pluginmanager.has_plugin(_NAME):
         config.pluginmanager.register(_load_postgres_plugin(), _NAME)
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which reads the groups
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None:
+            item.add_marker(pytest.mark.xdist_group(item.path.as_posix()))

@@ -10,11 +10,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import sys
-from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 from httpx_sse import aconnect_sse
 
 from wott_hub.config import HubConfig
@@ -22,8 +21,8 @@ from wott_hub.hub import Hub
 from wott_hub.network import DiscoveryConfig
 from wott_hub.td.validate import validate_td
 
-WOTT_HUB = Path(sys.executable).with_name("wott-hub")
 FOREIGN = "urn:example:wot-skin-7"
+pytestmark = pytest.mark.xdist_group("mdns")  # tactile devices on loopback mDNS: one worker (conftest.py)
 
 
 class Collector:
@@ -59,7 +58,7 @@ def same_packets(source: list[dict[str, Any]], reexposed: list[dict[str, Any]]) 
 
 
 def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(tmp_path, wait_for, run,
-                                                                              device_sim):
+                                                                              device_sim, discover):
     async def scenario() -> None:
         cfg = HubConfig(name="hub-under-test", http_port=0, ws_port=0, database=str(tmp_path / "hub.db"),
                         discovery=DiscoveryConfig(mdns=True, browse=True))
@@ -69,24 +68,13 @@ def test_the_hub_announces_itself_and_adopts_a_wot_device_from_another_process(t
         sim = None
         collector = None
         try:
-            # another process browses while the device simulator starts in a third one
-            async def browse() -> dict[str, dict]:
-                discover = await asyncio.create_subprocess_exec(
-                    str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "2", "--json",
-                    stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-                out, err = await asyncio.wait_for(discover.communicate(), 60)
-                assert discover.returncode == 0, err.decode()
-                return {r["name"]: r for r in json.loads(out)}
-
+            # another process browses (again if a busy machine made it miss one of ours in its 2 s
+            # window) while the device simulator starts in a third one
             names = {f"hub-under-test {hub.hub_id}", f"hub on hub-under-test {hub.hub_id}"}
-            browsing = asyncio.ensure_future(browse())
+            browsing = asyncio.ensure_future(discover(names, 2))
             sim = await device_sim("127.0.0.1", "skin-7", FOREIGN).start()
             sim_url = sim.base
             rows = await browsing
-            for _ in range(4):  # again if a busy machine made it miss one of ours in its 2 s window
-                if names <= set(rows):
-                    break
-                rows = await browse()
             tdd = rows[f"hub-under-test {hub.hub_id}"]  # instance names carry the hub id
             assert tdd["type"] == "Directory" and tdd["td_type"] == "Directory"
             assert tdd["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": "http"}

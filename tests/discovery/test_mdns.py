@@ -7,10 +7,6 @@ Zeroconf runs on 127.0.0.1 only (``interfaces=["127.0.0.1"]``): nothing leaves t
 
 from __future__ import annotations
 
-import asyncio
-import json
-import sys
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -26,8 +22,8 @@ from wott_hub.plugins.registry import Registry
 from wott_hub.td.builder import build_tactile_td
 from wott_hub.td.validate import validate_td
 
-WOTT_HUB = Path(sys.executable).with_name("wott-hub")
 TOKEN = "t0ken"
+pytestmark = pytest.mark.xdist_group("mdns")  # tactile devices on loopback mDNS: one worker (conftest.py)
 
 
 class ForeignTactilePlugin:
@@ -52,7 +48,7 @@ def registry() -> Registry:
     return reg
 
 
-def test_hub_announcements_are_found_by_another_process(wait_for, run):
+def test_hub_announcements_are_found_by_another_process(wait_for, run, discover):
     # introduction-dns-sd, -service-name, -service-name-directory, -txt-record
     async def scenario():
         directory = Directory(DirectorySettings(token=TOKEN))
@@ -68,19 +64,9 @@ def test_hub_announcements_are_found_by_another_process(wait_for, run):
 
             # another process browses (the real `wott-hub discover` command), again if a busy machine
             # made it miss one of ours in its window
-            async def discover() -> dict[str, dict] | None:
-                proc = await asyncio.create_subprocess_exec(
-                    str(WOTT_HUB), "discover", "--interface", "127.0.0.1", "--timeout", "3", "--json",
-                    stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
-                out, err = await asyncio.wait_for(proc.communicate(), 60)
-                assert proc.returncode == 0, err.decode()
-                rows = {r["name"]: r for r in json.loads(out)}
-                return rows if {"wott-hub-test", "barrel-1"} <= set(rows) else None
-
-            for _ in range(5):
-                if (rows := await discover()) is not None:
-                    break
-            assert rows is not None, "discover never listed both announced services"
+            names = {"wott-hub-test", "barrel-1"}
+            rows = await discover(names, 3)
+            assert names <= rows.keys(), "discover never listed both announced services"
             tdd, thing = rows["wott-hub-test"], rows["barrel-1"]
             assert tdd["type"] == "Directory" and tdd["td_type"] == "Directory"
             assert tdd["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": "http"}
