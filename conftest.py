@@ -5,11 +5,14 @@ registered here as a plugin, so ``tests/`` and ``directory/tests/`` (its own dis
 use one cluster per session. It is loaded by path: with ``--import-mode=importlib`` the
 test folders are not packages on ``sys.path``.
 
-pytest-xdist runs the suite on a few workers (``--dist loadgroup``, pyproject.toml): each file is
-one group, run whole on one worker in its order, except the files marked
-``xdist_group("mdns")``, which share one group. Those announce tactile devices on loopback mDNS
-(the same instance names, some of them) or assert what a browsing hub adopted: run at the same
-time on two workers they see each other's devices (docs/testing.md).
+pytest-xdist runs the suite on a few workers (``--dist loadfile``, pyproject.toml): each file is
+run whole on one worker in its order, except the files of ``MDNS_FILES``, which run one after the
+other on one worker. Those announce tactile devices on loopback mDNS (the same instance names, some
+of them) or assert what a browsing hub adopted: run at the same time on two workers they see each
+other's devices (docs/testing.md). The grouping is a scheduler of ours, not ``xdist_group``
+marks: xdist 3.8's ``loadgroup`` renames items through ``item._nodeid``, which pytest 9.2 no
+longer reads, so every test became its own unit (files split across workers, the mDNS files run
+at once).
 """
 
 from __future__ import annotations
@@ -17,8 +20,6 @@ from __future__ import annotations
 import importlib.util
 import sys
 from pathlib import Path
-
-import pytest
 
 _NAME = "wott_tests_postgres"
 
@@ -39,8 +40,23 @@ def pytest_configure(config) -> None:
         config.pluginmanager.register(_load_postgres_plugin(), _NAME)
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which reads the groups
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    for item in items:
-        if item.get_closest_marker("xdist_group") is None:
-            item.add_marker(pytest.mark.xdist_group(item.path.as_posix()))
+MDNS_FILES = frozenset({
+    "tests/discovery/test_mdns.py",
+    "tests/discovery/test_hub_adoption.py",
+    "tests/adversarial/test_adopted_devices.py",
+    "client/tests/test_client.py",
+})
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadfile`` with the mDNS files as one unit (the controller sees node ids only)."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class FilesAndMdns(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = nodeid.split("::", 1)[0]
+            return "mdns" if path in MDNS_FILES else path
+
+    return FilesAndMdns(config, log)

@@ -12,12 +12,10 @@ from contextlib import aclosing
 
 import httpx
 import numpy as np
-import pytest
 from httpx_sse import aconnect_sse
 from wott_client import Action, ActionDetails, AsyncClient, Client, Contacts, Frame, InvalidTD, NotFound
 
 DEFORMED = "skinDeformedDetection"
-pytestmark = pytest.mark.xdist_group("mdns")  # tactile devices on loopback mDNS: one worker (conftest.py)
 
 
 def _td_url(hub, device: str) -> str:

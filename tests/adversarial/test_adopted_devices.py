@@ -24,7 +24,6 @@ from . import surroundings as S
 
 EVENT = "skinDeformedDetection"
 GAP_S = 2.5
-pytestmark = pytest.mark.xdist_group("mdns")  # tactile devices on loopback mDNS: one worker (conftest.py)
 
 
 def grid_mesh(rows: int, cols: int) -> tuple[bytes, bytes]:

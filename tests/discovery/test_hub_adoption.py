@@ -13,7 +13,6 @@ import json
 from typing import Any
 
 import httpx
-import pytest
 from httpx_sse import aconnect_sse
 
 from wott_hub.config import HubConfig
@@ -22,7 +21,6 @@ from wott_hub.network import DiscoveryConfig
 from wott_hub.td.validate import validate_td
 
 FOREIGN = "urn:example:wot-skin-7"
-pytestmark = pytest.mark.xdist_group("mdns")  # tactile devices on loopback mDNS: one worker (conftest.py)
 
 
 class Collector:

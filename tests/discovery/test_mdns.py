@@ -23,7 +23,6 @@ from wott_hub.td.builder import build_tactile_td
 from wott_hub.td.validate import validate_td
 
 TOKEN = "t0ken"
-pytestmark = pytest.mark.xdist_group("mdns")  # tactile devices on loopback mDNS: one worker (conftest.py)
 
 
 class ForeignTactilePlugin:
