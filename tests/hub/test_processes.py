@@ -52,9 +52,26 @@ def config_file(tmp_path):
     return path
 
 
+_STARTED: list[subprocess.Popen] = []
+
+
+@pytest.fixture(autouse=True)
+def _end_processes():
+    """What a test started is gone after it, its pipes closed, whatever the test asserted."""
+    yield
+    while _STARTED:
+        proc = _STARTED.pop()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        proc.stdout.close()
+        proc.stderr.close()
+
+
 def _start(args, cwd) -> tuple[subprocess.Popen, dict]:
     proc = subprocess.Popen([WOTT_HUB, *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    _STARTED.append(proc)
     line = proc.stdout.readline()
     if not line:
         proc.kill()
