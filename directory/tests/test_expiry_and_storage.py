@@ -72,11 +72,15 @@ def test_storage_survives_a_restart(start_directory, helpers, tmp_path, listener
                 headers={"Content-Type": "application/merge-patch+json"})
         before = c.get("/things").json()
     first.stop()
-    tables = set(inspect(create_engine(db)).get_table_names())
+    engine = create_engine(db)
+    try:
+        tables = set(inspect(engine).get_table_names())
+        with engine.connect() as conn:
+            assert len(conn.execute(select(ThingRow.id)).all()) == 3
+            events = conn.execute(select(EventRow.id, EventRow.type).order_by(EventRow.id)).all()
+    finally:
+        engine.dispose()  # its pooled connections, closed now rather than whenever it is collected
     assert {"tdd_things", "tdd_events"} <= tables
-    with create_engine(db).connect() as conn:
-        assert len(conn.execute(select(ThingRow.id)).all()) == 3
-        events = conn.execute(select(EventRow.id, EventRow.type).order_by(EventRow.id)).all()
     assert [t for _, t in events][-3:] == ["thing_created", "thing_created", "thing_updated"]
 
     second = start_directory(db=db)  # another port: another base URL, so a new own TD replaces the old

@@ -236,7 +236,9 @@ def test_a_number_the_database_cannot_store_is_isolated_not_retried_forever(data
         assert w.flush()
     finally:
         w.stop()
+    try:
+        assert (w.written, w.failed_records) == (39, 1)
+        assert f"seq {bad.seq} not recorded" in w.last_error and "out of range" in w.last_error
+        assert [s for s, _, _ in _stored(engine)] == [r.seq for r in recs if r is not recs[21]]
+    finally:
         engine.dispose()
-    assert (w.written, w.failed_records) == (39, 1)
-    assert f"seq {bad.seq} not recorded" in w.last_error and "out of range" in w.last_error
-    assert [s for s, _, _ in _stored(engine)] == [r.seq for r in recs if r is not recs[21]]
