@@ -38,7 +38,7 @@ def test_announced_records_carry_the_scheme_the_hub_serves(tmp_path, run, tls, d
             assert hub.http_url.startswith(f"{scheme}://")
             names = {f"scheme-test {hub.hub_id}", f"hub on scheme-test {hub.hub_id}"}
             rows = await discover(names, 2)
-            assert names <= rows.keys(), f"browsed 5 times, found {sorted(rows)}"
+            assert names <= rows.keys(), f"discover never listed both, found {sorted(rows)}"
             directory = rows[f"scheme-test {hub.hub_id}"]
             assert directory["txt"] == {"td": "/.well-known/wot", "type": "Directory", "scheme": scheme}
             thing = rows[f"hub on scheme-test {hub.hub_id}"]
