@@ -85,3 +85,18 @@ def test_alternate_bad_options_are_one_line_and_exit_2(args, message):
     assert res.returncode == 2
     assert message in res.stderr.splitlines()[-1]
     assert "Traceback" not in res.stderr and not res.stdout  # nothing measured
+
+
+def test_alternate_latency_of_due_frames_counts_an_undelivered_frame_as_later_than_any():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from bench_alternate import _RUN, of_due
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    lat = [float(v) for v in range(100, 0, -1)]  # 1..100, in any order
+    assert of_due(lat, 100, 99) == 99.0 and of_due(lat, 100, 95) == 95.0  # all delivered: nearest rank
+    assert of_due(lat[4:], 100, 95) == 95.0  # the 4 latest never delivered: p95 is still a delivered one
+    assert of_due(lat[2:], 100, 99) == float("inf")  # 2 % never delivered: no p99 is reached
+    assert of_due([], 10, 50) == float("inf")
+    assert "def of_due(" in _RUN  # the copy the run in another checkout uses
+    compile(_RUN, "bench_alternate._RUN", "exec")
