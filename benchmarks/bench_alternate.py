@@ -53,11 +53,7 @@ async def main(n, dur):
     await L.latency_ours(n, 2.0, Path(tempfile.mkdtemp()), with_wotpy=False)  # warm-up, not kept
     seen.clear()
     r = await L.latency_ours(n, dur, Path(tempfile.mkdtemp()), with_wotpy=False)
-    lists = []
-    for v in seen:
-        if not any(v is w for w in lists):
-            lists.append(v)
-    sse = lists[0]
+    sse = seen[0]
     assert len(sse) == r["sse"][1], "latency_ours changed: see bench_alternate's docstring"
     due = n * 120 * dur  # the benchmark's devices run at 120 Hz
     fps = r["sse"][0] / dur  # cpu_us: latency.cpu_per_frame, written out (older checkouts lack it)
