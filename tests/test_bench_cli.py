@@ -87,12 +87,10 @@ def test_alternate_bad_options_are_one_line_and_exit_2(args, message):
     assert "Traceback" not in res.stderr and not res.stdout  # nothing measured
 
 
-def test_alternate_latency_of_due_frames_counts_an_undelivered_frame_as_later_than_any():
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    try:
-        from bench_alternate import _RUN, of_due
-    finally:
-        sys.path.remove(str(ROOT / "benchmarks"))
+def test_alternate_latency_of_due_frames_counts_an_undelivered_frame_as_later_than_any(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    from bench_alternate import _RUN, of_due
+
     lat = [float(v) for v in range(100, 0, -1)]  # 1..100, in any order
     assert of_due(lat, 100, 99) == 99.0 and of_due(lat, 100, 95) == 95.0  # all delivered: nearest rank
     assert of_due(lat[4:], 100, 95) == 95.0  # the 4 latest never delivered: p95 is still a delivered one
