@@ -61,6 +61,7 @@ def export_mcap(reader: StorageReader, out: IO[bytes], things: Sequence[str], *,
     ``CHECK_EVERY`` records: whatever it raises ends the export (the hub's: its client left)."""
     from mcap.writer import Writer
 
+    things = list(dict.fromkeys(things))  # a Thing named twice is exported once (issue 48)
     infos = {}
     for thing in things:
         info = reader.thing_info(thing)

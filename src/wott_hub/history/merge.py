@@ -4,6 +4,11 @@ Replay and MCAP export read each Thing's range in pages (``StorageReader.pages``
 merge them by time here, so two devices recorded side by side come out in the order they
 were recorded, whatever their rates. Within one Thing, time order is seq order; records of
 different Things at the same nanosecond come out in the order of ``things``.
+
+A Thing named twice is read once (``historyExport`` with one id repeated 10,000 times read it
+10,000 times over, a page of each in memory at once: 11.5 GB, issue 48), and the pages held
+while merging stay near ``page`` records in all: each Thing's stream reads ``page / len(things)``
+at a time (at least ``MIN_STREAM_PAGE``).
 """
 
 from __future__ import annotations
@@ -19,19 +24,23 @@ if TYPE_CHECKING:
 
     from .storage import StorageReader
 
-__all__ = ["merged_pages"]
+__all__ = ["MIN_STREAM_PAGE", "merged_pages"]
 
 _TIME = attrgetter("t_ns")
+MIN_STREAM_PAGE = 500
 
 
 def merged_pages(reader: StorageReader, things: Sequence[str], t_from_ns: int | None = None,
                  t_to_ns: int | None = None, names: list[str] | None = None,
                  page: int = 20_000) -> Iterator[list[Record]]:
-    """Pages of the records of every Thing in ``things``, in time order (one Thing: its pages as read)."""
+    """Pages of the records of every Thing in ``things`` (each once), in time order (one Thing: its
+    pages as read)."""
+    things = list(dict.fromkeys(things))
     if len(things) == 1:
         yield from reader.pages(things[0], t_from_ns, t_to_ns, names, page)
         return
-    streams = [chain.from_iterable(reader.pages(th, t_from_ns, t_to_ns, names, page)) for th in things]
+    each = max(page // max(len(things), 1), MIN_STREAM_PAGE)
+    streams = [chain.from_iterable(reader.pages(th, t_from_ns, t_to_ns, names, each)) for th in things]
     out: list[Record] = []
     for rec in heapq.merge(*streams, key=_TIME):
         out.append(rec)

@@ -45,7 +45,7 @@ class Replayer:
         if not (isinstance(offset_s, int | float) and math.isfinite(offset_s) and offset_s >= 0):
             raise InvalidInput(f"offset must be a finite number of seconds >= 0, got {offset_s!r}")
         self.reader = reader
-        self.things = [thing] if isinstance(thing, str) else list(thing)
+        self.things = [thing] if isinstance(thing, str) else list(dict.fromkeys(thing))
         if not self.things:
             raise InvalidInput("replay needs at least one recorded device")
         self.t_from_ns = t_from_ns

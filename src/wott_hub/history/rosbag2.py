@@ -67,6 +67,7 @@ def export_rosbag2(reader: StorageReader, out_dir: Path, things: Sequence[str], 
 
     from wott_hub.robotics.ros2_msgs import typestore
 
+    things = list(dict.fromkeys(things))  # a Thing named twice is exported once (issue 48)
     infos = {}
     for thing in things:
         info = reader.thing_info(thing)
