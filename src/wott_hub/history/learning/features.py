@@ -1,0 +1,268 @@
+"""What a recorded Thing becomes in a learning dataset: its sources (recorded affordances) and features.
+
+One source per recorded stream, each giving the features below for every frame (the value its latest
+sample says, ``resample.py``), and the value before any sample (``rest``: at rest, no contact, no
+action, a black image), which is what a skin that sent nothing is:
+
+| source (record) | feature (``observation.tactile.<id>.…``) | dtype, shape | from |
+|---|---|---|---|
+| ``skinDeformedDetection`` | ``deformation`` | float32 (N,), mm | ``robotics.payloads.skin_packet``; nodes absent from a packet are at rest |
+| ``skinDisplacement`` | ``displacement`` | float32 (N, 3), mm | ``robotics.raw_signals.displacement``, in the sensor frame |
+| ``contactInformation`` | ``contact_count``, ``contact_centroid``, ``contact_force`` | int64 (1,); float32 (3,) mm; float32 (3,) N | ``robotics.payloads.contacts``: the centroid weighted by each contact's force magnitude, the net force |
+| ``actionDetection`` | ``action`` | int64 (1,): 0 none, then the TD's enum in order | the event's value |
+| ``pressureGridRecorded`` | ``pressure`` | float32 (rows, cols), kPa | the recorded grid |
+| ``rawImageRecorded`` | ``observation.images.<id>.<camera>`` | video (H, W, 3) | the recorded PNG, grey made RGB |
+
+N is the Thing's ``skinNodes`` in their order (node ids in ``meta/wott.json``). ``--action THING.PROPERTY``
+adds ``PropertySource``: any recorded property of numbers, flattened (``action``, float32 (D,)).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wott_hub.errors import InvalidInput
+from wott_hub.robotics.payloads import contacts, skin_packet
+from wott_hub.robotics.raw_signals import DISPLACEMENT_EVENT, displacement
+
+if TYPE_CHECKING:
+    from wott_hub.events.record import Record
+    from wott_hub.robotics.geometry import SkinGeometry
+
+    from .resample import Held
+
+__all__ = ["CameraSource", "ContactsSource", "DeformationSource", "DisplacementSource", "Feature",
+           "GridSource", "PropertySource", "Source", "TouchActionSource", "block_values"]
+
+GRID_EVENT = "pressureGridRecorded"
+IMAGE_EVENT = "rawImageRecorded"
+
+
+@dataclass
+class Feature:
+    """One column of the dataset as lerobot declares it (``info.json``'s ``features``)."""
+
+    key: str
+    dtype: str
+    shape: tuple[int, ...]
+    names: list[str] | None = None
+    info: dict[str, Any] | None = None
+
+    def declared(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"dtype": self.dtype, "shape": list(self.shape), "names": self.names}
+        if self.info is not None:
+            out["info"] = self.info
+        return out
+
+
+@dataclass
+class Source:
+    """A recorded stream (``name``) of ``thing`` and the features each of its samples gives."""
+
+    thing: str
+    name: str
+    age: str  # its component of the Thing's age column
+    features: list[Feature] = field(default_factory=list)
+
+    def accepts(self, rec: Record) -> bool:
+        return True
+
+    def rest(self) -> list[np.ndarray]:
+        return [np.zeros(f.shape, np.float32 if f.dtype == "float32" else np.int64) for f in self.features]
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        raise NotImplementedError
+
+
+def block_values(source: Source, held: Held) -> list[np.ndarray]:
+    """The source's features at each frame of ``held``: each sample used decoded once."""
+    used = np.unique(held.index[held.index >= 0])
+    table = [source.rest(), *(source.decode(held.samples[i]) for i in used.tolist())]
+    where = np.zeros(len(held.samples) + 1, np.int64)  # sample index + 1 -> row of table
+    where[used + 1] = np.arange(1, len(used) + 1)
+    rows = where[held.index + 1]
+    return [np.stack([t[j] for t in table])[rows] for j in range(len(source.features))]
+
+
+def _prefix(thing: str) -> str:
+    return f"observation.tactile.{thing}"
+
+
+class DeformationSource(Source):
+    def __init__(self, thing: str, geom: SkinGeometry) -> None:
+        super().__init__(thing, "skinDeformedDetection", "deformation",
+                         [Feature(f"{_prefix(thing)}.deformation", "float32", (len(geom.ids),),
+                                  info={"unit": "mm"})])
+        self.geom = geom
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        p = skin_packet(rec.data, rec.t_ns)
+        out = np.zeros(len(self.geom.ids), np.float32)
+        rows = self.geom.rows_of(p.ids)
+        out[rows[rows >= 0]] = p.intensity_mm[rows >= 0]
+        return [out]
+
+
+class DisplacementSource(Source):
+    def __init__(self, thing: str, geom: SkinGeometry) -> None:
+        super().__init__(thing, DISPLACEMENT_EVENT, "displacement",
+                         [Feature(f"{_prefix(thing)}.displacement", "float32", (len(geom.ids), 3),
+                                  names=["node", "axis"], info={"unit": "mm"})])
+        self.geom = geom
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        d = displacement(rec.data, rec.t_ns)
+        out = np.zeros((len(self.geom.ids), 3), np.float32)
+        rows = self.geom.rows_of(d.ids)
+        out[rows[rows >= 0]] = d.displacement_mm[rows >= 0]
+        return [out]
+
+
+class ContactsSource(Source):
+    def __init__(self, thing: str) -> None:
+        p = _prefix(thing)
+        super().__init__(thing, "contactInformation", "contacts", [
+            Feature(f"{p}.contact_count", "int64", (1,), names=["count"]),
+            Feature(f"{p}.contact_centroid", "float32", (3,), names=["x", "y", "z"], info={"unit": "mm"}),
+            Feature(f"{p}.contact_force", "float32", (3,), names=["x", "y", "z"], info={"unit": "N"})])
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        c = contacts(rec.data)
+        n = len(c.locations_mm)
+        if n == 0:
+            return self.rest()
+        weight = np.linalg.norm(c.forces_n, axis=1)
+        if not weight.sum() > 0:
+            weight = np.ones(n)
+        centroid = (c.locations_mm * weight[:, None]).sum(axis=0) / weight.sum()
+        return [np.array([n], np.int64), centroid.astype(np.float32), c.forces_n.sum(axis=0).astype(np.float32)]
+
+
+class TouchActionSource(Source):
+    """``actionDetection`` as a code: 0 none yet, then the TD's ``enum`` in order; an action the TD did
+    not list gets the next code when first met (``classes`` is final once the export ends)."""
+
+    def __init__(self, thing: str, enum: list[str]) -> None:
+        self.classes = ["none", *[e for e in enum if isinstance(e, str) and e != "none"]]
+        super().__init__(thing, "actionDetection", "action",
+                         [Feature(f"{_prefix(thing)}.action", "int64", (1,), names=["action"],
+                                  info={"classes": self.classes})])
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        try:
+            action = json.loads(rec.data)
+        except ValueError:
+            action = rec.data
+        action = action if isinstance(action, str) else json.dumps(action)
+        if action not in self.classes:
+            self.classes.append(action)
+        return [np.array([self.classes.index(action)], np.int64)]
+
+
+class GridSource(Source):
+    def __init__(self, thing: str, rows: int, cols: int) -> None:
+        super().__init__(thing, GRID_EVENT, "pressure",
+                         [Feature(f"{_prefix(thing)}.pressure", "float32", (rows, cols), names=["row", "col"],
+                                  info={"unit": "kPa"})])
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        shape = self.features[0].shape
+        try:
+            grid = np.asarray(json.loads(rec.data)["pressure"], dtype=np.float32)
+        except (ValueError, KeyError, TypeError) as e:
+            raise InvalidInput(f"{self.thing}: a {GRID_EVENT} record is not a grid ({e!r})") from None
+        if grid.shape != shape:
+            raise InvalidInput(f"{self.thing}: a pressure grid of {grid.shape} where the first was {shape}")
+        return [grid]
+
+
+_CAMERA = re.compile(r'"camera"\s*:\s*"((?:[^"\\]|\\.)*)"')
+
+
+class CameraSource(Source):
+    """One camera's recorded images, as the frames of a video (decoded by the video writer)."""
+
+    def __init__(self, thing: str, camera: str, height: int, width: int) -> None:
+        super().__init__(thing, IMAGE_EVENT, f"camera.{camera}",
+                         [Feature(f"observation.images.{thing}.{camera}", "video", (height, width, 3),
+                                  names=["height", "width", "channels"])])
+        self.camera = camera
+
+    def accepts(self, rec: Record) -> bool:
+        found = _CAMERA.search(rec.data, 0, 400)  # the recorder writes the camera before the image
+        if found is not None:
+            return bool(json.loads(f'"{found.group(1)}"') == self.camera)
+        try:
+            return bool(json.loads(rec.data).get("camera") == self.camera)
+        except (ValueError, AttributeError):
+            return False
+
+    def image(self, rec: Record) -> np.ndarray:
+        """H x W x 3 uint8 of a recorded image (InvalidInput if it is not a PNG of the first one's size)."""
+        import io
+
+        from PIL import Image, UnidentifiedImageError
+
+        h, w, _ = self.features[0].shape
+        try:
+            png = base64.b64decode(json.loads(rec.data)["image"])
+            with Image.open(io.BytesIO(png)) as img:
+                rgb = np.asarray(img.convert("RGB"))
+        except (ValueError, KeyError, TypeError, UnidentifiedImageError, OSError) as e:
+            raise InvalidInput(f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})") \
+                from None
+        if rgb.shape != (h, w, 3):
+            raise InvalidInput(f"{self.thing}: camera {self.camera!r} changed size ({rgb.shape[1]} x {rgb.shape[0]}, "
+                               f"first {w} x {h}): a video keeps one size")
+        return rgb
+
+
+class PropertySource(Source):
+    """``--action THING.PROPERTY``: a recorded value of numbers (a number, a list, an object: flattened
+    in its order) as the ``action`` column."""
+
+    def __init__(self, thing: str, name: str, first: Any) -> None:
+        names = _flat_names(first, name)
+        if not names:
+            raise InvalidInput(f"--action {thing}.{name}: its value holds no number ({json.dumps(first)[:80]})")
+        super().__init__(thing, name, f"action.{name}",
+                         [Feature("action", "float32", (len(names),), names=names)])
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        try:
+            values = _flat_values(json.loads(rec.data))
+        except ValueError:
+            values = []
+        n = self.features[0].shape[0]
+        if len(values) != n:
+            raise InvalidInput(f"--action {self.thing}.{self.name}: a value of {len(values)} numbers where the "
+                               f"first had {n}")
+        return [np.asarray(values, np.float32)]
+
+
+def _flat_names(value: Any, at: str) -> list[str]:
+    if isinstance(value, bool):
+        return [at]
+    if isinstance(value, int | float):
+        return [at]
+    if isinstance(value, list):
+        return [n for i, v in enumerate(value) for n in _flat_names(v, f"{at}[{i}]")]
+    if isinstance(value, dict):
+        return [n for k, v in value.items() for n in _flat_names(v, f"{at}.{k}")]
+    return []
+
+
+def _flat_values(value: Any) -> list[float]:
+    if isinstance(value, int | float):
+        return [float(value)]
+    if isinstance(value, list):
+        return [x for v in value for x in _flat_values(v)]
+    if isinstance(value, dict):
+        return [x for v in value.values() for x in _flat_values(v)]
+    return []
