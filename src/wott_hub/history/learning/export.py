@@ -166,14 +166,14 @@ def _write(reader: StorageReader, req: DatasetRequest, p: Plan, episodes: list[E
         for number, episode in enumerate(episodes):
             n = frames_of(episode, req.fps)
             writer.begin(number, episode.task, n)
-            summary.records += _episode(reader, req, p, episode, number, n, writer, summary.frames)
+            done = summary.frames
+            summary.records += _episode(reader, req, p, episode, number, n, writer, done,
+                                        (lambda k: progress(done + k, total)) if progress is not None else None)
             writer.end()
             rows.append({"episode": number, "task": episode.task, "start_ns": episode.start_ns,
                          "end_ns": episode.end_ns, "frames": n})
             summary.frames += n
             summary.episodes += 1
-            if progress is not None:
-                progress(summary.frames, total)
         provenance = _provenance(req, p, rows)
         if req.fmt == "lerobot":
             from .card import card
@@ -188,7 +188,7 @@ def _write(reader: StorageReader, req: DatasetRequest, p: Plan, episodes: list[E
 
 
 def _episode(reader: StorageReader, req: DatasetRequest, p: Plan, episode: Episode, number: int, n: int,
-             writer: Any, before: int) -> int:
+             writer: Any, before: int, moved: Callable[[int], None] | None) -> int:
     readers = [ThingReader(reader, t.thing, t.sources, episode.start_ns, episode.end_ns) for t in p.things]
     task = writer.task_index(episode.task) if req.fmt == "lerobot" else 0
     for k0 in range(0, n, BLOCK):
@@ -214,6 +214,8 @@ def _episode(reader: StorageReader, req: DatasetRequest, p: Plan, episode: Episo
             writer.block(values, images)
         else:
             writer.block(values, images, times)
+        if moved is not None:
+            moved(k1)
     return sum(tr.records for tr in readers)
 
 
