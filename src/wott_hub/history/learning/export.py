@@ -71,8 +71,8 @@ class DatasetSummary:
 
 
 def frames_of(e: Episode, fps: int) -> int:
-    """Frames of an episode: one at its start, then every 1/fps up to its end (included)."""
-    return (e.end_ns - e.start_ns) * fps // 10**9 + 1
+    """Frames of an episode: every ``k`` whose time ``start + (k * 10**9) // fps`` is at or before its end."""
+    return ((e.end_ns - e.start_ns + 1) * fps - 1) // 10**9 + 1
 
 
 def _episodes(reader: StorageReader, req: DatasetRequest) -> list[Episode]:

@@ -79,49 +79,77 @@ class Source:
     def decode(self, rec: Record) -> list[np.ndarray]:
         raise NotImplementedError
 
+    def decode_many(self, recs: list[Record]) -> list[np.ndarray]:
+        """The features of several samples, stacked (samples x shape); a source may do it at once."""
+        table = [self.decode(r) for r in recs]
+        return [np.stack([t[j] for t in table]) for j in range(len(self.features))]
+
 
 def block_values(source: Source, held: Held) -> list[np.ndarray]:
     """The source's features at each frame of ``held``: each sample used decoded once."""
     used = np.unique(held.index[held.index >= 0])
-    table = [source.rest(), *(source.decode(held.samples[i]) for i in used.tolist())]
-    where = np.zeros(len(held.samples) + 1, np.int64)  # sample index + 1 -> row of table
+    decoded = source.decode_many([held.samples[i] for i in used.tolist()]) if len(used) else None
+    where = np.zeros(len(held.samples) + 1, np.int64)  # sample index + 1 -> row of the table (0: rest)
     where[used + 1] = np.arange(1, len(used) + 1)
     rows = where[held.index + 1]
-    return [np.stack([t[j] for t in table])[rows] for j in range(len(source.features))]
+    out = []
+    for j, rest in enumerate(source.rest()):
+        table = rest[None] if decoded is None else np.concatenate([rest[None], decoded[j]])
+        out.append(table[rows])
+    return out
+
+
+class _NodeSource(Source):
+    """A skin packet's nodes scattered onto the Thing's N nodes (those absent at rest), all the samples of
+    a block at once."""
+
+    def __init__(self, thing: str, name: str, age: str, feature: Feature, geom: SkinGeometry) -> None:
+        super().__init__(thing, name, age, [feature])
+        self.geom = geom
+
+    def nodes(self, rec: Record) -> tuple[np.ndarray, np.ndarray]:
+        """(node ids, their values) of one sample."""
+        raise NotImplementedError
+
+    def decode(self, rec: Record) -> list[np.ndarray]:
+        return [self.decode_many([rec])[0][0]]
+
+    def decode_many(self, recs: list[Record]) -> list[np.ndarray]:
+        parts = [self.nodes(r) for r in recs]
+        ids = np.concatenate([p[0] for p in parts])
+        values = np.concatenate([p[1] for p in parts])
+        sample = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
+        rows = self.geom.rows_of(ids)
+        known = rows >= 0
+        out = np.zeros((len(parts), *self.features[0].shape), np.float32)
+        out[sample[known], rows[known]] = values[known]
+        return [out]
 
 
 def _prefix(thing: str) -> str:
     return f"observation.tactile.{thing}"
 
 
-class DeformationSource(Source):
+class DeformationSource(_NodeSource):
     def __init__(self, thing: str, geom: SkinGeometry) -> None:
         super().__init__(thing, "skinDeformedDetection", "deformation",
-                         [Feature(f"{_prefix(thing)}.deformation", "float32", (len(geom.ids),),
-                                  info={"unit": "mm"})])
-        self.geom = geom
+                         Feature(f"{_prefix(thing)}.deformation", "float32", (len(geom.ids),), info={"unit": "mm"}),
+                         geom)
 
-    def decode(self, rec: Record) -> list[np.ndarray]:
+    def nodes(self, rec: Record) -> tuple[np.ndarray, np.ndarray]:
         p = skin_packet(rec.data, rec.t_ns)
-        out = np.zeros(len(self.geom.ids), np.float32)
-        rows = self.geom.rows_of(p.ids)
-        out[rows[rows >= 0]] = p.intensity_mm[rows >= 0]
-        return [out]
+        return p.ids, p.intensity_mm
 
 
-class DisplacementSource(Source):
+class DisplacementSource(_NodeSource):
     def __init__(self, thing: str, geom: SkinGeometry) -> None:
         super().__init__(thing, DISPLACEMENT_EVENT, "displacement",
-                         [Feature(f"{_prefix(thing)}.displacement", "float32", (len(geom.ids), 3),
-                                  names=["node", "axis"], info={"unit": "mm"})])
-        self.geom = geom
+                         Feature(f"{_prefix(thing)}.displacement", "float32", (len(geom.ids), 3),
+                                 names=["node", "axis"], info={"unit": "mm"}), geom)
 
-    def decode(self, rec: Record) -> list[np.ndarray]:
+    def nodes(self, rec: Record) -> tuple[np.ndarray, np.ndarray]:
         d = displacement(rec.data, rec.t_ns)
-        out = np.zeros((len(self.geom.ids), 3), np.float32)
-        rows = self.geom.rows_of(d.ids)
-        out[rows[rows >= 0]] = d.displacement_mm[rows >= 0]
-        return [out]
+        return d.ids, d.displacement_mm
 
 
 class ContactsSource(Source):

@@ -7,10 +7,10 @@ Layout (lerobot v0.6.1, what every release from 0.4 to 0.6 reads)::
     videos/<key>/chunk-XXX/file-XXX.mp4        per camera, many episodes a file (video.py)
     README.md                                  the dataset card (card.py)
 
-An episode's rows go to a file of their own first (``work/episode.parquet``) while their stats' first
-pass runs; at its end they are read back once, row group by row group, for the second pass
-(``stats.FeatureStats``: the histogram needs the episode's min and max) and appended to the data file.
-Memory holds a block of frames, never an episode. Rows: ``index`` counts frames over the dataset,
+An episode's rows go straight to the data file; its stats' first pass runs on each block and spills
+the values (``work/*.spill``), read back once at the episode's end for the second pass
+(``stats.FeatureStats``: the histogram needs the episode's min and max). Memory holds a block of
+frames, never an episode. Rows: ``index`` counts frames over the dataset,
 ``frame_index`` within the episode, ``timestamp`` is ``frame_index / fps``; tasks are numbered in the
 order they first appear.
 """
@@ -29,7 +29,6 @@ from .lerobot_files import (
     DATA_FILE_MB,
     arrow_array,
     data_path,
-    numpy_column,
     schema,
     serialised,
     write_episodes,
@@ -67,9 +66,8 @@ class LeRobotWriter:
         self.chunk, self.index = 0, 0
         self._data: pq.ParquetWriter | None = None
         self._data_frames = 0
-        self._work = root / "work"
-        self._episode: pq.ParquetWriter | None = None
-        self._first: dict[str, FeatureStats] = {}
+        self._work = root / "work"  # the stats' spill files
+        self._stats: dict[str, FeatureStats] = {}
         self._row: dict[str, Any] = {}
 
     # --- episodes -----------------------------------------------------------------------------
@@ -80,13 +78,13 @@ class LeRobotWriter:
         return self.tasks.index(task)
 
     def begin(self, episode: int, task: str, frames: int) -> None:
-        import pyarrow.parquet as pq
-
         self._work.mkdir(parents=True, exist_ok=True)
-        self._episode = pq.ParquetWriter(self._work / "episode.parquet", self.schema, compression="snappy",
-                                         use_dictionary=True)
-        self._first = {f.key: FeatureStats(f.dtype, f.shape) for f in self.columns}
-        self._row = {"episode_index": episode, "tasks": [task], "length": frames}
+        self._next_data_file(frames)
+        self._stats = {f.key: FeatureStats(f.dtype, f.shape, self._work / f"{i}.spill")
+                       for i, f in enumerate(self.columns)}
+        self._row = {"episode_index": episode, "tasks": [task], "length": frames,
+                     "data/chunk_index": self.chunk, "data/file_index": self.index,
+                     "dataset_from_index": self.frames, "dataset_to_index": self.frames + frames}
         for cam in self.cameras:
             self._row.update(cam.begin(frames))
 
@@ -94,34 +92,17 @@ class LeRobotWriter:
         """One block of frames: every column's values (frames x shape), each camera's held images."""
         import pyarrow as pa
 
-        assert self._episode is not None
-        self._episode.write_table(pa.table([arrow_array(f, values[f.key]) for f in self.columns],
-                                           schema=self.schema))
+        assert self._data is not None
+        self._data.write_table(pa.table([arrow_array(f, values[f.key]) for f in self.columns], schema=self.schema))
         for f in self.columns:
-            self._first[f.key].first(values[f.key])
+            self._stats[f.key].first(values[f.key])
         for cam, held in zip(self.cameras, images, strict=True):
             cam.write(held)
 
     def end(self) -> None:
-        """The episode's rows into the data file, its stats' second pass, its row of meta/episodes."""
-        import pyarrow.parquet as pq
-
-        assert self._episode is not None
-        self._episode.close()
-        self._episode = None
+        """The episode's stats (their second pass) and its row of meta/episodes."""
         frames = int(self._row["length"])
-        self._next_data_file(frames)
-        assert self._data is not None
-        self._row.update({"data/chunk_index": self.chunk, "data/file_index": self.index,
-                          "dataset_from_index": self.frames, "dataset_to_index": self.frames + frames})
-        work = pq.ParquetFile(self._work / "episode.parquet")
-        for g in range(work.num_row_groups):
-            table = work.read_row_group(g)
-            for f in self.columns:
-                self._first[f.key].second(numpy_column(f, table.column(f.key)))
-            self._data.write_table(table)
-        work.close()
-        stats = {key: st.result() for key, st in self._first.items()}
+        stats = {key: st.result() for key, st in self._stats.items()}
         for cam in self.cameras:
             self._row.update(cam.end())
             assert cam.stats is not None
@@ -132,7 +113,6 @@ class LeRobotWriter:
         self.stats = aggregate(self.stats, stats)
         self.frames += frames
         self._data_frames += frames
-        (self._work / "episode.parquet").unlink()
 
     def _next_data_file(self, frames: int) -> None:
         """lerobot's rule: a new file when this one's size and the episode's (at this file's bytes per
@@ -192,8 +172,9 @@ class LeRobotWriter:
 
     def abort(self) -> None:
         """Close what is open (the folder is removed by the caller)."""
-        for w in (self._episode, self._data):
-            if w is not None:
-                w.close()
+        if self._data is not None:
+            self._data.close()
+        for st in self._stats.values():
+            st.close()
         for cam in self.cameras:
             cam.close()

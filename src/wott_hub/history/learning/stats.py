@@ -6,10 +6,10 @@ lerobot stacks an episode's values and calls ``RunningQuantileStats.update`` onc
 min, max, mean, std (``sqrt(max(0, E[x²] - E[x]²))``), count (the episode's frames) and q01, q10,
 q50, q90, q99 read off a histogram of 5000 bins between ``min - 1e-10`` and ``max + 1e-10``
 (``linspace`` in the values' dtype, float32 for float32, float64 for integers). Here the same comes
-from two passes over the episode's blocks: the first finds min, max and the sums, the second fills the
-histogram with those final edges, so every count, and with it every quantile, is what the one-shot
-call gives; the sums are float64 where lerobot's ``np.mean`` is float32 (the two agree to float32's
-rounding). An episode has at least two frames (``export.py`` refuses shorter ones): on one frame
+from two passes over the episode's blocks: the first finds min, max and the sums and spills the values
+to a file (raw, an episode can be an hour), the second reads them back and fills the histogram with
+those final edges, so every count, and with it every quantile, is what the one-shot call gives; the sums
+are float64 where lerobot's ``np.mean`` is float32 (the two agree to float32's rounding). An episode has at least two frames (``export.py`` refuses shorter ones): on one frame
 lerobot's ``_compute_basic_stats`` keeps every axis of a field (N x 3 stats), which its own
 ``aggregate_stats`` then cannot fold with the others.
 
@@ -26,7 +26,8 @@ quantiles).
 
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -55,36 +56,45 @@ def auto_downsample(height: int, width: int, target: int = 150, threshold: int =
     return int(width / target) if width > height else int(height / target)
 
 
-def _quantile(hist: np.ndarray, edges: np.ndarray, target: float) -> Any:
-    """lerobot's ``_compute_single_quantile``."""
-    cumsum = np.cumsum(hist)
-    idx = int(np.searchsorted(cumsum, target))
-    if idx == 0:
-        return edges[0]
-    if idx >= len(cumsum):
-        return edges[-1]
-    before = cumsum[idx - 1]
-    inside = cumsum[idx] - before
-    if inside == 0:
-        return edges[idx]
-    return edges[idx] + (target - before) / inside * (edges[idx + 1] - edges[idx])
+def _quantiles(hists: np.ndarray, edges: np.ndarray, elements: int) -> dict[str, np.ndarray]:
+    """lerobot's ``_compute_single_quantile`` for every column at once: the bin where the cumulative count
+    reaches ``q * elements`` (its first edge if none is before it, the last edge if never), linear within
+    it (its left edge if it is empty)."""
+    cum = np.cumsum(hists, axis=1)
+    cols = np.arange(len(hists))
+    out = {}
+    for q, key in zip(QUANTILES, _KEYS, strict=True):
+        target = q * elements
+        idx = (cum < target).sum(axis=1)  # searchsorted(cumsum, target), side left
+        inner = np.clip(idx, 1, cum.shape[1] - 1)
+        before = cum[cols, inner - 1]
+        inside = cum[cols, inner] - before
+        left, right = edges[cols, inner], edges[cols, inner + 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = np.where(inside == 0, left, left + (target - before) / np.where(inside == 0, 1, inside)
+                             * (right - left))
+        value = np.where(idx == 0, edges[:, 0], np.where(idx >= cum.shape[1], edges[:, -1], value))
+        out[key] = value
+    return out
 
 
-def _finish(lo: np.ndarray, hi: np.ndarray, mean: np.ndarray, mean_sq: np.ndarray, hists: list[np.ndarray],
-            edges: list[np.ndarray], elements: int, frames: int) -> Stats:
+def _finish(lo: np.ndarray, hi: np.ndarray, mean: np.ndarray, mean_sq: np.ndarray, hists: np.ndarray,
+            edges: np.ndarray, elements: int, frames: int) -> Stats:
     out: Stats = {"min": lo.copy(), "max": hi.copy(), "mean": mean.astype(lo.dtype),
                   "std": np.sqrt(np.maximum(0, mean_sq - mean**2)).astype(lo.dtype),
                   "count": np.array([frames])}
-    for q, key in zip(QUANTILES, _KEYS, strict=True):
-        out[key] = np.array([_quantile(h, e, q * elements) for h, e in zip(hists, edges, strict=True)])
+    out.update(_quantiles(hists, edges, elements))
     return out
 
 
 class FeatureStats:
-    """One numeric feature's stats over one episode: ``first`` on every block, then ``second`` on every
-    block again, then ``result``."""
+    """One numeric feature's stats over one episode: ``first`` on every block, then ``result``.
 
-    def __init__(self, dtype: str, shape: tuple[int, ...]) -> None:
+    The second pass needs the values again: ``first`` spills each non-zero one with its column (two raw
+    files, ``spill`` + ``.cols``/``.vals``) and counts the zeros, as a skin's field is mostly zeros (20
+    nodes pressed of 700); ``result`` reads the spill back a few MB at a time."""
+
+    def __init__(self, dtype: str, shape: tuple[int, ...], spill: Path) -> None:
         self.work = np.result_type(np.dtype(dtype), np.float32)
         self.width = shape[-1]
         self.scalar = tuple(shape) == (1,)
@@ -94,40 +104,75 @@ class FeatureStats:
         self.hi: np.ndarray | None = None
         self.total = np.zeros(self.width)
         self.total_sq = np.zeros(self.width)
-        self.hists = [np.zeros(BINS) for _ in range(self.width)]
-        self.edges: list[np.ndarray] = []
-
-    def _rows(self, block: np.ndarray) -> np.ndarray:
-        return np.asarray(block).reshape(-1, self.width).astype(self.work, copy=False)
+        self.zeros = np.zeros(self.width, np.int64)
+        self.paths = (spill.with_suffix(".cols"), spill.with_suffix(".vals"))
+        self._out: tuple[BinaryIO, BinaryIO] | None = None
 
     def first(self, block: np.ndarray) -> None:
-        rows = self._rows(block)
+        rows = np.ascontiguousarray(np.asarray(block).reshape(-1, self.width), dtype=self.work)
         if not len(rows):
             return
         self.frames += len(block)
         self.elements += len(rows)
-        lo, hi = rows.min(axis=0), rows.max(axis=0)
+        w = self.width
+        at = np.flatnonzero(rows)  # every sum and extreme from the non-zero values alone
+        cols = (at % w).astype(np.int32)
+        vals = rows.ravel()[at]
+        zeros = len(rows) - np.bincount(cols, minlength=w)
+        self.zeros += zeros
+        wide = vals.astype(np.float64)
+        self.total += np.bincount(cols, weights=wide, minlength=w)
+        self.total_sq += np.bincount(cols, weights=wide * wide, minlength=w)
+        lo, hi = np.full(w, np.inf, self.work), np.full(w, -np.inf, self.work)
+        np.minimum.at(lo, cols, vals)
+        np.maximum.at(hi, cols, vals)
+        lo, hi = np.where(zeros > 0, np.minimum(lo, 0), lo), np.where(zeros > 0, np.maximum(hi, 0), hi)
         self.lo = lo if self.lo is None else np.minimum(self.lo, lo)
         self.hi = hi if self.hi is None else np.maximum(self.hi, hi)
-        wide = rows.astype(np.float64)
-        self.total += wide.sum(axis=0)
-        self.total_sq += (wide * wide).sum(axis=0)
+        if self._out is None:
+            self._out = (self.paths[0].open("wb"), self.paths[1].open("wb"))
+        cols.tofile(self._out[0])
+        vals.tofile(self._out[1])
 
-    def second(self, block: np.ndarray) -> None:
-        assert self.lo is not None and self.hi is not None
-        if not self.edges:
-            self.edges = [np.linspace(self.lo[i] - 1e-10, self.hi[i] + 1e-10, BINS + 1) for i in range(self.width)]
-        rows = self._rows(block)
-        for i in range(self.width):
-            self.hists[i] += np.histogram(rows[:, i], bins=self.edges[i])[0]
+    def _histograms(self) -> tuple[np.ndarray, np.ndarray]:
+        """The second pass: every value's bin as ``np.histogram(column, bins=edges)`` gives it (bins
+        [e_j, e_j+1), the last one closed), found by arithmetic on the uniform edges, then put right by
+        comparing with the edges themselves (in lerobot's dtype)."""
+        assert self.lo is not None and self.hi is not None and self._out is not None
+        self.close()
+        w = self.width
+        edges = np.stack([np.linspace(self.lo[i] - 1e-10, self.hi[i] + 1e-10, BINS + 1) for i in range(w)])
+        flat, row = edges.ravel(), np.arange(w) * (BINS + 1)
+        first, step = edges[:, 0], (edges[:, -1] - edges[:, 0]) / BINS
+        step = np.where(step > 0, step, 1)
+        counts = np.zeros(w * BINS, np.int64)
+        with self.paths[0].open("rb") as fc, self.paths[1].open("rb") as fv:
+            while len(cols := np.fromfile(fc, np.int32, 1 << 22)):
+                vals = np.fromfile(fv, self.work, len(cols))
+                b = np.clip(((vals - first[cols]) / step[cols]).astype(np.int64), 0, BINS - 1)
+                for _ in range(2):  # the arithmetic is off by one bin at most, next to an edge
+                    b -= (vals < flat[row[cols] + b]) & (b > 0)
+                    b += (vals >= flat[row[cols] + b + 1]) & (b < BINS - 1)
+                counts += np.bincount(cols * BINS + b, minlength=w * BINS)
+        zero_bin = np.clip((edges <= 0).sum(axis=1) - 1, 0, BINS - 1)  # searchsorted(edges, 0, "right") - 1
+        counts[np.arange(w) * BINS + zero_bin] += self.zeros
+        for path in self.paths:
+            path.unlink()
+        return counts.reshape(w, BINS), edges
 
     def result(self) -> Stats:
         assert self.lo is not None and self.hi is not None
+        hists, edges = self._histograms()
         n = self.elements
-        out = _finish(self.lo, self.hi, self.total / n, self.total_sq / n, self.hists, self.edges, n, self.frames)
+        out = _finish(self.lo, self.hi, self.total / n, self.total_sq / n, hists, edges, n, self.frames)
         if self.scalar:  # lerobot keeps (1,) features 1-D: reshaped to (1,)
             out = {k: v if k == "count" else np.asarray(v).reshape(1) for k, v in out.items()}
         return out
+
+    def close(self) -> None:
+        if self._out is not None:
+            for f in self._out:
+                f.close()
 
 
 class ImageStats:
@@ -160,7 +205,7 @@ class ImageStats:
             e = np.linspace(cmin - 1e-10, cmax + 1e-10, BINS + 1)
             edges.append(e)
             hists.append(np.histogram(levels, bins=e, weights=self.counts[c])[0])
-        st = _finish(np.array(lo), np.array(hi), np.array(mean), np.array(mean_sq), hists, edges,
+        st = _finish(np.array(lo), np.array(hi), np.array(mean), np.array(mean_sq), np.array(hists), np.array(edges),
                      int(self.counts[0].sum()), self.sampled)
         return {k: v if k == "count" else (np.asarray(v, np.float64) / 255.0).reshape(3, 1, 1) for k, v in st.items()}
 

@@ -10,12 +10,15 @@ one episode). Frame ``k`` of a file has pts ``k`` in a time base of ``1 / fps`` 
 of it is checked: every frame is found within 1e-4 s of its timestamp, ``tests/history/learning``).
 
 A held image (zero-order hold: the same recorded image for many frames) is decoded and converted to
-``yuv420p`` once; before a camera's first image its frames are black. Stats come from the images of
-the frames lerobot would sample (``stats.ImageStats``).
+``yuv420p`` once, and a GOP that shows the same images as the one before is muxed again, not encoded
+again (``_File.gop``); each episode starts with a keyframe. Before a camera's first image its frames
+are black. Stats come from the images of the frames lerobot would sample (``stats.ImageStats``).
 """
 
 from __future__ import annotations
 
+import queue
+import threading
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -46,35 +49,75 @@ class VideoSettings:
             raise InvalidInput(f"--codec {codec!r}: expected one of {', '.join(CODECS)}")
         self.codec, self.crf, self.gop = codec, crf, gop
         self.encoder, self.preset = CODECS[codec]
+        self.reuse = codec == "h264"  # each frame's packet out at once: a held image's GOP muxed again
+        self.extra = {"tune": "zerolatency"} if codec == "h264" else {}
 
     def options(self) -> dict[str, str]:
-        return {"g": str(self.gop), "crf": str(self.crf), "preset": str(self.preset)}
+        return {"g": str(self.gop), "crf": str(self.crf), "preset": str(self.preset), **self.extra}
 
     def info(self, height: int, width: int, fps: int) -> dict[str, Any]:
         """The ``info`` of a video feature, as lerobot's ``get_video_info`` writes it."""
         return {"video.height": height, "video.width": width, "video.codec": self.codec,
                 "video.pix_fmt": "yuv420p", "video.fps": fps, "video.channels": 3, "has_audio": False,
                 "video.g": self.gop, "video.crf": self.crf, "video.preset": self.preset, "video.fast_decode": 0,
-                "video.video_backend": "pyav", "video.extra_options": {}, "is_depth_map": False}
+                "video.video_backend": "pyav", "video.extra_options": dict(self.extra), "is_depth_map": False}
 
 
 class _File:
+    """One mp4 being written. Frames go in by GOP (``gop`` frames from a keyframe): a GOP whose frames
+    show the same held images as the GOP before is not encoded again; its packets are muxed again at
+    its own times (H.264 without B-frames: an IDR and its P-frames decode alone, the same bytes, as a
+    ZOH-held image is the same picture). A camera recording 1 image/s at 30 fps is then encoded once
+    an image, not 30 times (a 640 x 480 frame costs ~1 ms of x264 here)."""
+
     def __init__(self, path: Path, fps: int, height: int, width: int, settings: VideoSettings) -> None:
         import av
 
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
+        self.fps = fps
+        self.settings = settings
         self.container: Any = av.open(str(path), "w")
         self.stream: Any = self.container.add_stream(settings.encoder, rate=fps, options=settings.options())
         self.stream.pix_fmt = "yuv420p"
         self.stream.width, self.stream.height = width, height
         self.stream.time_base = Fraction(1, fps)
-        self.frames = 0
+        self.frames = 0  # frames in the file
+        self.encoded = 0  # frames the encoder saw since its last keyframe
+        self._last: tuple[tuple[int, ...], list[tuple[bytes, bool]]] | None = None  # a GOP's images, packets
 
-    def write(self, frame: Any) -> None:
-        frame.pts = self.frames
-        self.frames += 1
-        self.container.mux(self.stream.encode(frame))
+    def gop(self, keys: tuple[int, ...], frames: list[Any], new_episode: bool) -> None:
+        """The next ``len(frames)`` frames (a GOP, or the end of one), showing the images ``keys``."""
+        import av
+
+        full = len(frames) == self.settings.gop and self.encoded % self.settings.gop == 0 and not new_episode
+        if full and self._last is not None and self._last[0] == keys:
+            for k, (data, key) in enumerate(self._last[1]):
+                packet = av.Packet(data)
+                packet.time_base = Fraction(1, self.fps)  # the frames' (the muxer's own is finer)
+                packet.pts = packet.dts = self.frames + k
+                packet.stream = self.stream
+                packet.is_keyframe = key
+                self.container.mux(packet)
+            self.frames += len(frames)
+            return
+        packets: list[tuple[bytes, bool]] = []
+        for k, frame in enumerate(frames):
+            frame.pts = self.frames
+            frame.time_base = Fraction(1, self.fps)
+            force = k == 0 and (new_episode or self.encoded % self.settings.gop) and self.frames > 0
+            # an episode starts with a keyframe; the frame object is a held image's, used again: set each time
+            frame.pict_type = av.video.frame.PictureType.I if force else av.video.frame.PictureType.NONE
+            if force:
+                self.encoded = 0
+            out = self.stream.encode(frame)
+            packets += [(bytes(p), bool(p.is_keyframe)) for p in out]
+            self.container.mux(out)
+            self.frames += 1
+            self.encoded += 1
+        # kept for the next GOP only if each frame came out at once (x264 zerolatency; not svt-av1)
+        ok = full and self.settings.reuse and len(packets) == len(frames) and packets[0][1]
+        self._last = (keys, packets) if ok else None
 
     def close(self) -> None:
         self.container.mux(self.stream.encode(None))
@@ -101,6 +144,11 @@ class CameraVideo:
         self.stats: ImageStats | None = None
         self._episode_start = 0
         self._frame = 0
+        self._gop = []
+        self._first_gop = True
+        self._queue: queue.Queue[Held | None] = queue.Queue(maxsize=2)
+        self._worker: threading.Thread | None = None
+        self._error: BaseException | None = None
 
     def _next_file(self) -> None:
         if self.file is not None:
@@ -119,12 +167,17 @@ class CameraVideo:
         self.stats = ImageStats(frames)
         self._wanted = np.array(self.stats.wanted, np.int64)
         self._frame = 0
+        self._gop: list[tuple[int, Any]] = []
+        self._first_gop = True
         self._episode_start = self.file.frames
         return {f"videos/{self.key}/chunk_index": self.chunk, f"videos/{self.key}/file_index": self.index,
                 f"videos/{self.key}/from_timestamp": self._episode_start / self.fps}
 
     def end(self) -> dict[str, Any]:
+        self._queue.join()
+        self._check()
         assert self.file is not None
+        self._flush()
         return {f"videos/{self.key}/to_timestamp": self.file.frames / self.fps}
 
     def _frame_of(self, rec: Any) -> tuple[Any, np.ndarray]:
@@ -142,7 +195,31 @@ class CameraVideo:
         return self._image[1], self._image[2]
 
     def write(self, held: Held) -> None:
-        """The block's frames: each the image held then."""
+        """The block's frames, each the image held then: decoded, converted and encoded in a thread of
+        the camera's own (PNG decoding and x264 let the GIL go: the export's other work goes on), at most
+        two blocks behind."""
+        if self._worker is None:
+            self._worker = threading.Thread(target=self._work, name=f"video {self.key}", daemon=True)
+            self._worker.start()
+        self._check()
+        self._queue.put(held)
+
+    def _work(self) -> None:
+        while (held := self._queue.get()) is not None:
+            try:
+                if self._error is None:
+                    self._write(held)
+            except BaseException as e:  # raised in the export's thread at the next call
+                self._error = e
+            finally:
+                self._queue.task_done()
+        self._queue.task_done()
+
+    def _check(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+    def _write(self, held: Held) -> None:
         assert self.file is not None and self.stats is not None
         first = self._frame
         n = len(held.index)
@@ -155,10 +232,22 @@ class CameraVideo:
             if picks[i + 1]:
                 self.stats.add(rgb, int(picks[i + 1]))
                 picks[i + 1] = 0
-            self.file.write(frame)
+            self._gop.append((rec.seq if rec is not None else -1, frame))
+            if len(self._gop) == self.settings.gop:
+                self._flush()
         self._frame += n
 
+    def _flush(self) -> None:
+        assert self.file is not None
+        if self._gop:
+            self.file.gop(tuple(k for k, _ in self._gop), [f for _, f in self._gop], self._first_gop)
+            self._gop, self._first_gop = [], False
+
     def close(self) -> None:
+        if self._worker is not None:
+            self._queue.put(None)
+            self._worker.join()
+            self._worker = None
         if self.file is not None:
             self.file.close()
             self.file = None
