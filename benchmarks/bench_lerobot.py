@@ -25,7 +25,6 @@ import base64
 import io
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -79,10 +78,17 @@ def _record(db: Path, minutes: float, camera_hz: float) -> int:
         desc = example_device(shape, thing)
         td = build_tactile_td(desc)
         if thing == CAMERA:
-            td["events"]["rawImageRecorded"] = {"title": "rawImageRecorded", "data": {"type": "object", "properties": {
-                "camera": {"type": "string", "enum": ["camera"]}}}}
-        seq[thing] = w.register_thing(thing, title=thing, family="scene", td=json.dumps(td),
-                                      static_values=json.dumps(static_property_values(desc)))
+            td["events"]["rawImageRecorded"] = {
+                "title": "rawImageRecorded",
+                "data": {"type": "object", "properties": {"camera": {"type": "string", "enum": ["camera"]}}},
+            }
+        seq[thing] = w.register_thing(
+            thing,
+            title=thing,
+            family="scene",
+            td=json.dumps(td),
+            static_values=json.dumps(static_property_values(desc)),
+        )
         nodes[thing] = desc.mesh.n_nodes
     w.start()
     images = _images()
@@ -102,21 +108,66 @@ def _record(db: Path, minutes: float, camera_hz: float) -> int:
                 micro = np.round(rng.normal(0, 400, (20, 3))).astype(np.int64)
                 force = round(float(-inten.sum()), 3)
                 seq[thing] += 3
-                batch += [Record(thing, seq[thing] - 2, KIND_EVENT, "skinDeformedDetection", t,
-                                 skin_deformed_json(res), skin=SkinArrays(ids, inten)),
-                          FieldRecord(thing, seq[thing] - 1, t, FieldArrays(ids.astype(np.int64), micro)),
-                          Record(thing, seq[thing], KIND_PROPERTY, "contactInformation", t, encode(
-                              {"numOfContacts": 1, "contactLocations": [{"x": 1.0 * start, "y": 2.0, "z": 0.0}],
-                               "contactForces": [{"x": 0.0, "y": 0.0, "z": force}]}))]
+                batch += [
+                    Record(
+                        thing,
+                        seq[thing] - 2,
+                        KIND_EVENT,
+                        "skinDeformedDetection",
+                        t,
+                        skin_deformed_json(res),
+                        skin=SkinArrays(ids, inten),
+                    ),
+                    FieldRecord(thing, seq[thing] - 1, t, FieldArrays(ids.astype(np.int64), micro)),
+                    Record(
+                        thing,
+                        seq[thing],
+                        KIND_PROPERTY,
+                        "contactInformation",
+                        t,
+                        encode(
+                            {
+                                "numOfContacts": 1,
+                                "contactLocations": [{"x": 1.0 * start, "y": 2.0, "z": 0.0}],
+                                "contactForces": [{"x": 0.0, "y": 0.0, "z": force}],
+                            }
+                        ),
+                    ),
+                ]
                 if k % (2 * FPS) == 0:
                     seq[thing] += 1
-                    batch.append(Record(thing, seq[thing], KIND_EVENT, "actionDetection", t,
-                                        encode(ACTIONS[(k // (2 * FPS)) % len(ACTIONS)])))
+                    batch.append(
+                        Record(
+                            thing,
+                            seq[thing],
+                            KIND_EVENT,
+                            "actionDetection",
+                            t,
+                            encode(ACTIONS[(k // (2 * FPS)) % len(ACTIONS)]),
+                        )
+                    )
             if image_every and k % image_every == 0:
                 seq[CAMERA] += 1
-                batch.append(Record(CAMERA, seq[CAMERA], KIND_EVENT, "rawImageRecorded", t, json.dumps(
-                    {"timeStamp": t, "camera": "camera", "width": 640, "height": 480, "channels": 3,
-                     "image": images[(k // image_every) % len(images)]}, separators=(",", ":"))))
+                batch.append(
+                    Record(
+                        CAMERA,
+                        seq[CAMERA],
+                        KIND_EVENT,
+                        "rawImageRecorded",
+                        t,
+                        json.dumps(
+                            {
+                                "timeStamp": t,
+                                "camera": "camera",
+                                "width": 640,
+                                "height": 480,
+                                "channels": 3,
+                                "image": images[(k // image_every) % len(images)],
+                            },
+                            separators=(",", ":"),
+                        ),
+                    )
+                )
         for r in batch:
             w.submit(r)
         assert w.flush(3600)
@@ -128,9 +179,24 @@ def _record(db: Path, minutes: float, camera_hz: float) -> int:
 
 def _export(db: Path, out: Path, codec: str) -> tuple[float, float, float, str]:
     """(wall s, CPU s, peak RSS MB, stderr) of the command in a process of its own."""
-    cmd = [str(Path(sys.executable).with_name("wott-hub")), "history", "export", "--format", "lerobot", "-o", str(out),
-           *[a for d in DEVICES for a in ("--device", d)], "--fps", str(FPS), "--codec", codec, "--database", str(db),
-           "--no-check", "--no-progress"]
+    cmd = [
+        str(Path(sys.executable).with_name("wott-hub")),
+        "history",
+        "export",
+        "--format",
+        "lerobot",
+        "-o",
+        str(out),
+        *[a for d in DEVICES for a in ("--device", d)],
+        "--fps",
+        str(FPS),
+        "--codec",
+        codec,
+        "--database",
+        str(db),
+        "--no-check",
+        "--no-progress",
+    ]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _, status, usage = os.wait4(proc.pid, 0)
@@ -159,7 +225,9 @@ def _read_back(out: Path) -> tuple[int, int, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--minutes", type=float, default=60.0, help="Recorded time (default 60).")
-    ap.add_argument("--camera-hz", type=float, default=1.0, help="Camera images recorded per second (default 1).")
+    ap.add_argument(
+        "--camera-hz", type=float, default=1.0, help="Camera images recorded per second (default 1)."
+    )
     ap.add_argument("--codec", default="h264", help="Video codec: h264 (default) or av1.")
     ap.add_argument("--no-doc", action="store_true", help="Print only; leave docs/benchmarks.md alone.")
     args = ap.parse_args()
@@ -181,9 +249,29 @@ def main() -> None:
     assert rows == expected and frames == expected, (rows, frames, expected)
     hour = "one hour" if scale == 1 else f"{args.minutes:g} min, scaled x{scale:g} to one hour"
     table = markdown_table(
-        ["recorded", "records", "rows", "video frames", "wall s / hour", "CPU s / hour", "peak RSS MB", "dataset MB"],
-        [[hour, f"{records:,}", f"{rows:,}", f"{frames:,}", f"{wall * scale:.1f}", f"{cpu * scale:.1f}",
-          f"{rss:.0f}", f"{size * scale:.0f}"]])
+        [
+            "recorded",
+            "records",
+            "rows",
+            "video frames",
+            "wall s / hour",
+            "CPU s / hour",
+            "peak RSS MB",
+            "dataset MB",
+        ],
+        [
+            [
+                hour,
+                f"{records:,}",
+                f"{rows:,}",
+                f"{frames:,}",
+                f"{wall * scale:.1f}",
+                f"{cpu * scale:.1f}",
+                f"{rss:.0f}",
+                f"{size * scale:.0f}",
+            ]
+        ],
+    )
     body = f"""
 The demo's three skins at {FPS} frames/s (skin packet, displacement packet and contacts per frame, an
 action every 2 s) and a 640 x 480 camera recording {args.camera_hz:g} image/s, written through

@@ -18,9 +18,24 @@ from ._db import open_reader, resolve_database, time_range
 __all__ = ["export_dataset"]
 
 
-def export_dataset(fmt: str, devices: list[str], t_from: str | None, t_to: str | None, output: Path | None,
-                   database: str | None, config: Path | None, *, fps: int, episodes: list[str], task: str | None,
-                   state: list[str], action: str | None, codec: str, progress: bool, check: bool) -> None:
+def export_dataset(
+    fmt: str,
+    devices: list[str],
+    t_from: str | None,
+    t_to: str | None,
+    output: Path | None,
+    database: str | None,
+    config: Path | None,
+    *,
+    fps: int,
+    episodes: list[str],
+    task: str | None,
+    state: list[str],
+    action: str | None,
+    codec: str,
+    progress: bool,
+    check: bool,
+) -> None:
     from wott_hub.history.db import describe
     from wott_hub.history.learning import export as learning
     from wott_hub.history.learning.episodes import DEFAULT_TASK, parse_episode, task_text
@@ -33,10 +48,23 @@ def export_dataset(fmt: str, devices: list[str], t_from: str | None, t_to: str |
     given = [parse_episode(e, default_task) for e in episodes] or None
     lo, hi = time_range(t_from, t_to)
     reader = open_reader(resolve_database(database, config), integrity=check)
-    req = learning.DatasetRequest(fmt, output, list(devices), fps=fps, t_from_ns=lo, t_to_ns=hi, episodes=given,
-                                  task=default_task, state=list(state), action=action, codec=codec,
-                                  database=describe(reader.engine.url))
+    req = learning.DatasetRequest(
+        fmt,
+        output,
+        list(devices),
+        fps=fps,
+        t_from_ns=lo,
+        t_to_ns=hi,
+        episodes=given,
+        task=default_task,
+        state=list(state),
+        action=action,
+        codec=codec,
+        database=describe(reader.engine.url),
+    )
     with Bar(f"{fmt} {', '.join(devices)}", 1, wanted(progress)) as bar:
         summary = learning.export_dataset(reader, req, bar.update)
-    typer.echo(f"{summary.episodes} episodes, {summary.frames} frames ({summary.records} records) in {output}",
-               err=True)
+    typer.echo(
+        f"{summary.episodes} episodes, {summary.frames} frames ({summary.records} records) in {output}",
+        err=True,
+    )

@@ -18,13 +18,20 @@ from .devices import TokenOption, UrlOption, _hub, _request
 
 __all__ = ["app"]
 
-app = typer.Typer(help="Mark episodes while recording (start, end) and list the recorded ones.",
-                  short_help="Mark episodes while recording.", no_args_is_help=True, rich_markup_mode=None)
+app = typer.Typer(
+    help="Mark episodes while recording (start, end) and list the recorded ones.",
+    short_help="Mark episodes while recording.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
 
 
 @app.command(short_help="Start an episode with its task.")
-def start(task: str = typer.Argument(..., help="What is being done, one line (e.g. 'pick up the cup')."),
-          url: str = UrlOption, token: str = TokenOption) -> None:
+def start(
+    task: str = typer.Argument(..., help="What is being done, one line (e.g. 'pick up the cup')."),
+    url: str = UrlOption,
+    token: str = TokenOption,
+) -> None:
     """Start an episode on the running hub (one at a time)."""
     out = _request("POST", f"{_hub(url)}/actions/startEpisode", token, {"task": task})
     typer.echo(f"episode started: {out['task']}")
@@ -42,8 +49,9 @@ def list_episodes(
     t_from: str = typer.Option(None, "--from", help="Start: ISO 8601 (local unless Z), -10m, seconds."),
     t_to: str = typer.Option(None, "--to", help="End, same forms as --from."),
     as_json: bool = typer.Option(False, "--json", help="JSON Lines for scripts."),
-    database: str = typer.Option(None, "--database", "-d", help="Database file or URL (default: the config's, "
-                                 "else ./wott-hub.db)."),
+    database: str = typer.Option(
+        None, "--database", "-d", help="Database file or URL (default: the config's, else ./wott-hub.db)."
+    ),
     config: Path = typer.Option(None, "--config", "-c", exists=True, dir_okay=False, help="Hub config."),
 ) -> None:
     """The episodes marked in history (each start paired with its end), oldest first."""

@@ -90,9 +90,11 @@ def export(
     episodes: list[str] = typer.Option(None, "--episodes", help="lerobot, zarr: an episode FROM..TO or "
                                        "FROM..TO=TASK (repeatable; default: those marked while recording, "
                                        "else the whole range)."),
-    task: str = typer.Option(None, "--task", help="lerobot, zarr: the task of an episode given without one."),
+    task: str = typer.Option(None, "--task", help="lerobot, zarr: the task of an episode given without "
+                             "one."),
     state: list[str] = typer.Option(None, "--state", help="lerobot, zarr: also flatten this feature into "
-                                    "observation.state (ID.FEATURE or FEATURE, e.g. contact_force; repeatable)."),
+                                    "observation.state (ID.FEATURE or FEATURE, e.g. contact_force; "
+                                    "repeatable)."),
     action: str = typer.Option(None, "--action", help="lerobot, zarr: THING.PROPERTY, a recorded property "
                                "of another Thing as the action column."),
     codec: str = typer.Option("h264", "--codec", help="lerobot: camera videos as h264 or av1."),
@@ -111,8 +113,9 @@ def export(
     if fmt in ("lerobot", "zarr"):
         from ._learning import export_dataset
 
-        export_dataset(fmt, device, t_from, t_to, output, database, config, fps=fps, episodes=episodes or [],
-                       task=task, state=state or [], action=action, codec=codec, progress=progress, check=check)
+        export_dataset(fmt, device, t_from, t_to, output, database, config, fps=fps,
+                       episodes=episodes or [], task=task, state=state or [], action=action, codec=codec,
+                       progress=progress, check=check)
         return
     n = _export(device, t_from, t_to, name, output, database, config, fmt=fmt, scene=scene, scene_hz=scene_hz,
                 progress=progress, check=check)

@@ -1,4 +1,4 @@
-"""Episodes marked while recording: the hub Thing's ``startEpisode``/``endEpisode`` and the Thing ``episodes``.
+"""Episodes marked while recording: the hub Thing's ``startEpisode``/``endEpisode``, the Thing ``episodes``.
 
 A learning dataset is cut into episodes, each with a task ("pick up the cup"). Marking them while
 recording is one POST each (``startEpisode {"task"}``, ``endEpisode {}``: the CLI's ``wott-hub episode``,
@@ -42,30 +42,51 @@ if TYPE_CHECKING:
 
 __all__ = ["ACTIONS", "Episodes"]
 
-_MARK = {"type": "object", "properties": {
-    "task": {"type": "string", "description": "What is being done in the episode."},
-    "timeStamp": {"type": "integer", "minimum": 0, "unit": "ns"}}, "required": ["task", "timeStamp"]}
-_SPAN = {"type": "object", "properties": {
-    "task": {"type": "string"},
-    "from": {"type": "integer", "description": "Start, ns since the epoch."},
-    "to": {"type": "integer", "description": "End, ns since the epoch (endEpisode only)."}}}
+_MARK = {
+    "type": "object",
+    "properties": {
+        "task": {"type": "string", "description": "What is being done in the episode."},
+        "timeStamp": {"type": "integer", "minimum": 0, "unit": "ns"},
+    },
+    "required": ["task", "timeStamp"],
+}
+_SPAN = {
+    "type": "object",
+    "properties": {
+        "task": {"type": "string"},
+        "from": {"type": "integer", "description": "Start, ns since the epoch."},
+        "to": {"type": "integer", "description": "End, ns since the epoch (endEpisode only)."},
+    },
+}
 
 ACTIONS: dict[str, dict[str, Any]] = {
     "startEpisode": {
         "title": "startEpisode",
         "description": "Start an episode of the recording with its task (one at a time); recorded as the "
-                       "Thing 'episodes' event episodeStarted, read by `history export --format lerobot`.",
-        "safe": False, "idempotent": False, "synchronous": True,
-        "input": {"type": "object", "properties": {
-            "task": {"type": "string", "minLength": 1, "maxLength": MAX_TASK,
-                     "description": "What is being done, one line (e.g. 'pick up the cup')."}},
-            "required": ["task"]},
+        "Thing 'episodes' event episodeStarted, read by `history export --format lerobot`.",
+        "safe": False,
+        "idempotent": False,
+        "synchronous": True,
+        "input": {
+            "type": "object",
+            "properties": {
+                "task": {
+                    "type": "string",
+                    "minLength": 1,
+                    "maxLength": MAX_TASK,
+                    "description": "What is being done, one line (e.g. 'pick up the cup').",
+                }
+            },
+            "required": ["task"],
+        },
         "output": _SPAN,
     },
     "endEpisode": {
         "title": "endEpisode",
         "description": "End the open episode (recorded as the Thing 'episodes' event episodeEnded).",
-        "safe": False, "idempotent": False, "synchronous": True,
+        "safe": False,
+        "idempotent": False,
+        "synchronous": True,
         "input": {"type": "object", "properties": {}},
         "output": _SPAN,
     },
@@ -75,7 +96,8 @@ _TD: dict[str, Any] = {
     "@context": list(TD_CONTEXT),
     "title": EPISODES_THING,
     "description": "Episodes marked while recording (the hub Thing's startEpisode and endEpisode).",
-    "security": ["nosec_sc"], "securityDefinitions": {"nosec_sc": {"scheme": "nosec"}},
+    "security": ["nosec_sc"],
+    "securityDefinitions": {"nosec_sc": {"scheme": "nosec"}},
     "events": {
         EPISODE_STARTED: {"title": EPISODE_STARTED, "description": "An episode started.", "data": _MARK},
         EPISODE_ENDED: {"title": EPISODE_ENDED, "description": "The episode ended.", "data": _MARK},
@@ -95,8 +117,14 @@ class Episodes:
 
     def install(self, td: dict[str, Any], server: HubServer) -> None:
         """Declare the actions in the hub Thing's TD (before it is served) and mount their handlers."""
-        install_actions(td, server, {"startEpisode": (ACTIONS["startEpisode"], self._start),
-                                     "endEpisode": (ACTIONS["endEpisode"], self._end)})
+        install_actions(
+            td,
+            server,
+            {
+                "startEpisode": (ACTIONS["startEpisode"], self._start),
+                "endEpisode": (ACTIONS["endEpisode"], self._end),
+            },
+        )
 
     async def serve(self) -> None:
         """Serve the Thing ``episodes`` (recorded) once history is open; nothing without history."""

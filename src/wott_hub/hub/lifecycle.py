@@ -39,8 +39,8 @@ from wott_hub.security.tls import server_context
 from wott_hub.servient import HUB_THING_ID, HubServer, ServedThing, hub_td
 
 from .device_actions import DeviceActions
-from .episodes import Episodes
 from .devices import DeviceRuntime, Devices
+from .episodes import Episodes
 from .history_api import install as install_history_api
 from .identity import hub_identity
 from .management import FleetManagement

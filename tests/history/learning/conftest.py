@@ -31,8 +31,14 @@ def hub_session(tmp_path_factory, hub_thread, press_scene):
 
     d = tmp_path_factory.mktemp("session")
     db = d / "hub.db"
-    ht = hub_thread(HubConfig(http_port=0, ws_port=None, database=str(db),
-                              devices=(press_scene("pad-a"), press_scene("pad-b", shape="cylinder", start_s=0.2))))
+    ht = hub_thread(
+        HubConfig(
+            http_port=0,
+            ws_port=None,
+            database=str(db),
+            devices=(press_scene("pad-a"), press_scene("pad-b", shape="cylinder", start_s=0.2)),
+        )
+    )
     ht.start()
     try:
         base = f"{ht.url}/wot/hub/actions"
@@ -63,7 +69,7 @@ def camera_frames(n: int, h: int = 48, w: int = 64) -> list[np.ndarray]:
     for k in range(n):
         img = np.stack([xx * 255 // w, yy * 255 // h, np.full((h, w), 60)], axis=-1).astype(np.uint8)
         x0 = (k * 7) % (w - 12)
-        img[10:22, x0:x0 + 12] = (250, 250, 40)
+        img[10:22, x0 : x0 + 12] = (250, 250, 40)
         out.append(img)
     return out
 
@@ -82,13 +88,27 @@ def camera_session(tmp_path_factory):
     w = HistoryWriter(engine, interval_s=0.01)
     desc = example_device("flat", "cam")
     td = build_tactile_td(desc)
-    td["events"]["rawImageRecorded"] = {"title": "rawImageRecorded", "data": {"type": "object", "properties": {
-        "camera": {"type": "string", "enum": ["top"]}}}}
+    td["events"]["rawImageRecorded"] = {
+        "title": "rawImageRecorded",
+        "data": {"type": "object", "properties": {"camera": {"type": "string", "enum": ["top"]}}},
+    }
     td["events"]["pressureGridRecorded"] = {"title": "pressureGridRecorded", "data": {"type": "object"}}
-    seq = {"cam": w.register_thing("cam", title="cam", family="test", td=json.dumps(td),
-                                   static_values=encode(static_property_values(desc))),
-           "arm": w.register_thing("arm", title="arm", family="robot", td=json.dumps(
-               {"title": "arm", "properties": {"jointPositions": {"type": "object"}}}), static_values="{}")}
+    seq = {
+        "cam": w.register_thing(
+            "cam",
+            title="cam",
+            family="test",
+            td=json.dumps(td),
+            static_values=encode(static_property_values(desc)),
+        ),
+        "arm": w.register_thing(
+            "arm",
+            title="arm",
+            family="robot",
+            td=json.dumps({"title": "arm", "properties": {"jointPositions": {"type": "object"}}}),
+            static_values="{}",
+        ),
+    }
     n_nodes = desc.mesh.n_nodes
     records: list[Record] = []
 
@@ -101,8 +121,10 @@ def camera_session(tmp_path_factory):
     events = []
     for k in range(180):  # 60 Hz, 3 s
         ids = sorted(rng.choice(n_nodes, 6, replace=False).tolist())
-        nodes = ",".join(f'{{"deformedNodeID":{i},"deformedNodeIntensity":{round(float(v), 3)!r}}}'
-                         for i, v in zip(ids, rng.uniform(0.01, 1.5, 6), strict=True))
+        nodes = ",".join(
+            f'{{"deformedNodeID":{i},"deformedNodeIntensity":{round(float(v), 3)!r}}}'
+            for i, v in zip(ids, rng.uniform(0.01, 1.5, 6), strict=True)
+        )
         events.append((T0 + k * 16_666_667, "skin", nodes, len(ids)))
     for k in range(30):
         events.append((T0 + 5_000_000 + k * 100_000_000, "image", k, 0))
@@ -112,20 +134,49 @@ def camera_session(tmp_path_factory):
         events.append((T0 + 1_000_000 + k * 20_000_000, "arm", k, 0))
     for t, what, payload, n in sorted(events, key=lambda e: e[0]):
         if what == "skin":
-            put("cam", KIND_EVENT, "skinDeformedDetection", t,
-                f'{{"timeStamp":{t},"numOfDeformedNodes":{n},"arrayOfDeformedNodes":[{payload}]}}')
+            put(
+                "cam",
+                KIND_EVENT,
+                "skinDeformedDetection",
+                t,
+                f'{{"timeStamp":{t},"numOfDeformedNodes":{n},"arrayOfDeformedNodes":[{payload}]}}',
+            )
         elif what == "image":
             img = frames[payload]
-            put("cam", KIND_EVENT, "rawImageRecorded", t, json.dumps(
-                {"timeStamp": t, "camera": "top", "width": img.shape[1], "height": img.shape[0], "channels": 3,
-                 "image": _png(img)}, separators=(",", ":")))
+            put(
+                "cam",
+                KIND_EVENT,
+                "rawImageRecorded",
+                t,
+                json.dumps(
+                    {
+                        "timeStamp": t,
+                        "camera": "top",
+                        "width": img.shape[1],
+                        "height": img.shape[0],
+                        "channels": 3,
+                        "image": _png(img),
+                    },
+                    separators=(",", ":"),
+                ),
+            )
         elif what == "grid":
             grid = (np.arange(20).reshape(4, 5) * 0.5 + payload).round(3).tolist()
-            put("cam", KIND_EVENT, "pressureGridRecorded", t,
-                json.dumps({"timeStamp": t, "rows": 4, "cols": 5, "pressure": grid}))
+            put(
+                "cam",
+                KIND_EVENT,
+                "pressureGridRecorded",
+                t,
+                json.dumps({"timeStamp": t, "rows": 4, "cols": 5, "pressure": grid}),
+            )
         else:
-            put("arm", KIND_PROPERTY, "jointPositions", t,
-                json.dumps({"shoulder": round(0.01 * payload, 4), "elbow": round(-0.02 * payload, 4)}))
+            put(
+                "arm",
+                KIND_PROPERTY,
+                "jointPositions",
+                t,
+                json.dumps({"shoulder": round(0.01 * payload, 4), "elbow": round(-0.02 * payload, 4)}),
+            )
     w.start()
     for r in records:
         w.submit(r)

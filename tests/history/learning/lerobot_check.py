@@ -32,10 +32,28 @@ import numpy as np
 __all__ = ["INFO_KEYS", "Invalid", "Loaded", "check_lerobot", "hf_features"]
 
 TOLERANCE_S = 1e-4
-INFO_KEYS = {"codebase_version", "fps", "features", "total_episodes", "total_frames", "total_tasks", "chunks_size",
-             "data_files_size_in_mb", "video_files_size_in_mb", "data_path", "video_path", "robot_type", "splits"}
-DEFAULTS = {"timestamp": "float32", "frame_index": "int64", "episode_index": "int64", "index": "int64",
-            "task_index": "int64"}
+INFO_KEYS = {
+    "codebase_version",
+    "fps",
+    "features",
+    "total_episodes",
+    "total_frames",
+    "total_tasks",
+    "chunks_size",
+    "data_files_size_in_mb",
+    "video_files_size_in_mb",
+    "data_path",
+    "video_path",
+    "robot_type",
+    "splits",
+}
+DEFAULTS = {
+    "timestamp": "float32",
+    "frame_index": "int64",
+    "episode_index": "int64",
+    "index": "int64",
+    "task_index": "int64",
+}
 STAT_KEYS = {"min", "max", "mean", "std", "count", "q01", "q10", "q50", "q90", "q99"}
 
 
@@ -82,26 +100,35 @@ class Loaded:
 
         self.root = root
         self.info = json.loads((root / "meta/info.json").read_text())
-        _require(set(self.info) == INFO_KEYS, f"info.json keys {sorted(set(self.info) ^ INFO_KEYS)} differ from "
-                                              "DatasetInfo's")
+        _require(
+            set(self.info) == INFO_KEYS,
+            f"info.json keys {sorted(set(self.info) ^ INFO_KEYS)} differ from DatasetInfo's",
+        )
         _require(self.info["codebase_version"] == "v3.0", "codebase_version is not v3.0")
         _require(isinstance(self.info["fps"], int) and self.info["fps"] > 0, "fps is not a positive integer")
         self.fps = self.info["fps"]
         self.features = self.info["features"]
         for key, dtype in DEFAULTS.items():
-            _require(key in self.features and self.features[key]["dtype"] == dtype
-                     and tuple(self.features[key]["shape"]) == (1,), f"default feature {key!r} missing or wrong")
+            _require(
+                key in self.features
+                and self.features[key]["dtype"] == dtype
+                and tuple(self.features[key]["shape"]) == (1,),
+                f"default feature {key!r} missing or wrong",
+            )
         for key in self.features:
             _require("/" not in key, f"feature {key!r} has a '/'")
         paths = sorted(str(p) for p in (root / "data").glob("*/*.parquet"))
         _require(bool(paths), "no data parquet file")
         try:
-            self.data = datasets.Dataset.from_parquet(paths, features=hf_features(self.features), keep_in_memory=True)
+            self.data = datasets.Dataset.from_parquet(
+                paths, features=hf_features(self.features), keep_in_memory=True
+            )
         except (ValueError, TypeError, KeyError, datasets.exceptions.DatasetGenerationError) as e:
             raise Invalid(f"datasets cannot load the data with the declared features: {e!r}") from None
         self.files = {p: pq.ParquetFile(p).metadata.num_rows for p in paths}
         self.episodes = datasets.Dataset.from_parquet(
-            sorted(str(p) for p in (root / "meta/episodes").glob("*/*.parquet")), keep_in_memory=True)
+            sorted(str(p) for p in (root / "meta/episodes").glob("*/*.parquet")), keep_in_memory=True
+        )
         self.tasks = pd.read_parquet(root / "meta/tasks.parquet")
         self.stats = json.loads((root / "meta/stats.json").read_text())
 
@@ -110,10 +137,12 @@ def _rows(loaded: Loaded) -> None:
     info, data = loaded.info, loaded.data
     _require(len(data) == info["total_frames"], f"{len(data)} rows, info says {info['total_frames']}")
     columns = {k for k, f in loaded.features.items() if f["dtype"] != "video"}
-    _require(set(data.column_names) == columns, f"columns {sorted(set(data.column_names) ^ columns)} differ from "
-                                                "the declared features")
+    _require(
+        set(data.column_names) == columns,
+        f"columns {sorted(set(data.column_names) ^ columns)} differ from the declared features",
+    )
     for start in range(0, len(data), 4096):
-        batch = data.with_format("numpy")[start:start + 4096]
+        batch = data.with_format("numpy")[start : start + 4096]
         n = len(batch["index"])
         for key in columns:
             ft = loaded.features[key]
@@ -122,17 +151,24 @@ def _rows(loaded: Loaded) -> None:
             got = np.asarray(batch[key])
             _require(got.shape == want, f"{key!r}: rows of shape {got.shape[1:]}, declared {shape}")
             _require(got.dtype == np.dtype(ft["dtype"]), f"{key!r}: {got.dtype}, declared {ft['dtype']}")
-        _require(bool((batch["index"] == np.arange(start, start + n)).all()), f"index is not 0..N-1 at row {start}")
+        _require(
+            bool((batch["index"] == np.arange(start, start + n)).all()), f"index is not 0..N-1 at row {start}"
+        )
         ts = batch["timestamp"]
-        _require(bool((ts == (batch["frame_index"] / loaded.fps).astype(np.float32)).all()),
-                 f"timestamp is not frame_index / fps near row {start}")
+        _require(
+            bool((ts == (batch["frame_index"] / loaded.fps).astype(np.float32)).all()),
+            f"timestamp is not frame_index / fps near row {start}",
+        )
 
 
 def _episodes(loaded: Loaded) -> None:
     info, eps = loaded.info, loaded.episodes
     _require(len(eps) == info["total_episodes"], f"{len(eps)} episodes, info says {info['total_episodes']}")
     tasks = loaded.tasks
-    _require(tasks.index.name == "task" and list(tasks.columns) == ["task_index"], "tasks.parquet is not indexed by task")
+    _require(
+        tasks.index.name == "task" and list(tasks.columns) == ["task_index"],
+        "tasks.parquet is not indexed by task",
+    )
     _require(list(tasks["task_index"]) == list(range(len(tasks))), "task_index is not 0..n-1")
     _require(len(tasks) == info["total_tasks"], "total_tasks differs from tasks.parquet")
     data = loaded.data.with_format("numpy")
@@ -145,17 +181,30 @@ def _episodes(loaded: Loaded) -> None:
         _require(ep["episode_index"] == i, f"episode {i} has episode_index {ep['episode_index']}")
         lo, hi = ep["dataset_from_index"], ep["dataset_to_index"]
         _require(hi - lo == ep["length"] > 0, f"episode {i}: from/to index and length disagree")
-        _require(lo == (eps[i - 1]["dataset_to_index"] if i else 0), f"episode {i} does not follow the previous")
+        _require(
+            lo == (eps[i - 1]["dataset_to_index"] if i else 0), f"episode {i} does not follow the previous"
+        )
         rows = data[lo:hi]
         _require(bool((rows["episode_index"] == i).all()), f"episode {i}: rows of another episode")
-        _require(bool((rows["frame_index"] == np.arange(hi - lo)).all()), f"episode {i}: frame_index is not 0..")
-        path = str(loaded.root / info["data_path"].format(chunk_index=ep["data/chunk_index"],
-                                                          file_index=ep["data/file_index"]))
-        _require(path in offsets and offsets[path][0] <= lo and hi <= offsets[path][1],
-                 f"episode {i}: its data file does not hold its rows")
+        _require(
+            bool((rows["frame_index"] == np.arange(hi - lo)).all()), f"episode {i}: frame_index is not 0.."
+        )
+        path = str(
+            loaded.root
+            / info["data_path"].format(chunk_index=ep["data/chunk_index"], file_index=ep["data/file_index"])
+        )
+        _require(
+            path in offsets and offsets[path][0] <= lo and hi <= offsets[path][1],
+            f"episode {i}: its data file does not hold its rows",
+        )
         names = [tasks.iloc[t].name for t in np.unique(rows["task_index"])]
-        _require(all(0 <= t < len(tasks) for t in np.unique(rows["task_index"])), f"episode {i}: unknown task_index")
-        _require(sorted(names) == sorted(ep["tasks"]), f"episode {i}: tasks {ep['tasks']} but rows say {names}")
+        _require(
+            all(0 <= t < len(tasks) for t in np.unique(rows["task_index"])),
+            f"episode {i}: unknown task_index",
+        )
+        _require(
+            sorted(names) == sorted(ep["tasks"]), f"episode {i}: tasks {ep['tasks']} but rows say {names}"
+        )
         for key in loaded.features:
             if loaded.features[key]["dtype"] != "string":
                 _require(f"stats/{key}/count" in ep, f"episode {i}: no stats of {key!r}")
@@ -171,8 +220,10 @@ def _stats(loaded: Loaded) -> None:
         shape = tuple(ft["shape"])
         want = (3, 1, 1) if ft["dtype"] in ("video", "image") else (shape[-1],)
         for name, value in st.items():
-            _require(value.shape == ((1,) if name == "count" else want),
-                     f"{key!r} {name}: shape {value.shape}, lerobot makes {want}")
+            _require(
+                value.shape == ((1,) if name == "count" else want),
+                f"{key!r} {name}: shape {value.shape}, lerobot makes {want}",
+            )
             if "image" in key and name != "count":  # _assert_type_and_shape
                 _require(value.shape in ((3, 1, 1), (1, 1, 1)), f"{key!r} {name}: not an image's shape")
         _require(int(st["count"][0]) > 0, f"{key!r}: count 0")
@@ -187,15 +238,27 @@ def _videos(loaded: Loaded) -> None:
         ft = loaded.features[key]
         for i, ep in enumerate(loaded.episodes):
             path = loaded.root / loaded.info["video_path"].format(
-                video_key=key, chunk_index=ep[f"videos/{key}/chunk_index"], file_index=ep[f"videos/{key}/file_index"])
+                video_key=key,
+                chunk_index=ep[f"videos/{key}/chunk_index"],
+                file_index=ep[f"videos/{key}/file_index"],
+            )
             _require(path.exists(), f"{key!r} episode {i}: no {path}")
             start = ep[f"videos/{key}/from_timestamp"]
-            wanted = start + data[ep["dataset_from_index"]:ep["dataset_to_index"]]["timestamp"].astype(np.float64)
+            wanted = start + data[ep["dataset_from_index"] : ep["dataset_to_index"]]["timestamp"].astype(
+                np.float64
+            )
             with av.open(str(path)) as container:
                 stream = container.streams.video[0]
-                _require((stream.height, stream.width) == tuple(ft["shape"][:2]), f"{key!r}: frames of another size")
-                container.seek(max(0, round(float(wanted[0]) / stream.time_base) - 1), backward=True, any_frame=False,
-                               stream=stream)
+                _require(
+                    (stream.height, stream.width) == tuple(ft["shape"][:2]),
+                    f"{key!r}: frames of another size",
+                )
+                container.seek(
+                    max(0, round(float(wanted[0]) / stream.time_base) - 1),
+                    backward=True,
+                    any_frame=False,
+                    stream=stream,
+                )
                 found = []
                 for frame in container.decode(stream):
                     if frame.pts is None:
@@ -205,12 +268,20 @@ def _videos(loaded: Loaded) -> None:
                         break
             found_ts = np.sort(np.array(found))
             _require(len(found_ts) > 0, f"{key!r} episode {i}: no frame decoded")
-            at = np.clip(np.searchsorted(found_ts, wanted), 1, len(found_ts) - 1) if len(found_ts) > 1 else \
-                np.zeros(len(wanted), np.int64)
-            nearest = np.minimum(np.abs(found_ts[at] - wanted), np.abs(found_ts[np.maximum(at - 1, 0)] - wanted))
+            at = (
+                np.clip(np.searchsorted(found_ts, wanted), 1, len(found_ts) - 1)
+                if len(found_ts) > 1
+                else np.zeros(len(wanted), np.int64)
+            )
+            nearest = np.minimum(
+                np.abs(found_ts[at] - wanted), np.abs(found_ts[np.maximum(at - 1, 0)] - wanted)
+            )
             bad = np.nonzero(nearest >= TOLERANCE_S)[0]
-            _require(not len(bad), f"{key!r} episode {i}: {len(bad)} rows have no frame within {TOLERANCE_S} s "
-                                   f"(first at {wanted[bad[0]] if len(bad) else 0:.6f} s)")
+            _require(
+                not len(bad),
+                f"{key!r} episode {i}: {len(bad)} rows have no frame within {TOLERANCE_S} s "
+                f"(first at {wanted[bad[0]] if len(bad) else 0:.6f} s)",
+            )
 
 
 def check_lerobot(root: Path) -> Loaded:

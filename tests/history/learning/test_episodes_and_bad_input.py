@@ -17,7 +17,9 @@ def hub(tmp_path_factory, hub_thread, press_scene):
     from wott_hub.config import HubConfig
 
     db = tmp_path_factory.mktemp("marks") / "hub.db"
-    ht = hub_thread(HubConfig(http_port=0, ws_port=None, database=str(db), devices=(press_scene("pad"),))).start()
+    ht = hub_thread(
+        HubConfig(http_port=0, ws_port=None, database=str(db), devices=(press_scene("pad"),))
+    ).start()
     yield ht, db
     ht.stop()
 
@@ -55,7 +57,9 @@ def test_episodes_from_the_cli_and_the_client_are_history_records(hub, cli):
     done = cli("episode", "start", "pick up the cup", "--url", ht.url)
     assert done.returncode == 0 and "episode started: pick up the cup" in done.stdout, done.stderr
     again = cli("episode", "start", "twice", "--url", ht.url)
-    assert again.returncode == 4 and again.stderr.startswith("error: ") and len(again.stderr.splitlines()) == 1
+    assert (
+        again.returncode == 4 and again.stderr.startswith("error: ") and len(again.stderr.splitlines()) == 1
+    )
     done = cli("episode", "end", "--url", ht.url)
     assert done.returncode == 0 and "episode ended: pick up the cup" in done.stdout, done.stderr
     with Client() as client:
@@ -80,24 +84,40 @@ def test_a_hub_without_history_has_nothing_to_mark(hub_thread):
         ht.stop()
 
 
-@pytest.mark.parametrize("args, code, says", [
-    (["--from", "2001-01-01T00:00:00Z", "--to", "2001-01-01T00:01:00Z"], 2, "no records"),
-    (["--device", "nobody"], 3, "no recorded device 'nobody'"),
-    (["--fps", "0"], 2, "--fps"),
-    (["--fps", "10000"], 2, "--fps"),
-    (["--episodes", "-1m"], 2, "FROM..TO"),
-    (["--action", "pad"], 2, "THING.PROPERTY"),
-    (["--state", "nothing"], 2, "--state 'nothing'"),
-    (["--codec", "mpeg2"], 2, "--codec"),
-])
+@pytest.mark.parametrize(
+    "args, code, says",
+    [
+        (["--from", "2001-01-01T00:00:00Z", "--to", "2001-01-01T00:01:00Z"], 2, "no records"),
+        (["--device", "nobody"], 3, "no recorded device 'nobody'"),
+        (["--fps", "0"], 2, "--fps"),
+        (["--fps", "10000"], 2, "--fps"),
+        (["--episodes", "-1m"], 2, "FROM..TO"),
+        (["--action", "pad"], 2, "THING.PROPERTY"),
+        (["--state", "nothing"], 2, "--state 'nothing'"),
+        (["--codec", "mpeg2"], 2, "--codec"),
+    ],
+)
 def test_bad_export_input_is_one_line_and_leaves_nothing(camera_session, tmp_path, cli, args, code, says):
     db, _ = camera_session
     for fmt in ("lerobot", "zarr"):
         out = tmp_path / fmt
-        done = cli("history", "export", "--format", fmt, "-o", str(out), "--device", "cam", "--database", str(db),
-                   *args)
+        done = cli(
+            "history",
+            "export",
+            "--format",
+            fmt,
+            "-o",
+            str(out),
+            "--device",
+            "cam",
+            "--database",
+            str(db),
+            *args,
+        )
         assert done.returncode == code, done.stderr
-        assert done.stderr.startswith("error: ") and len(done.stderr.splitlines()) == 1 and says in done.stderr
+        assert (
+            done.stderr.startswith("error: ") and len(done.stderr.splitlines()) == 1 and says in done.stderr
+        )
         assert list(tmp_path.iterdir()) == []
 
 
@@ -106,7 +126,9 @@ def test_an_existing_output_folder_is_left_as_it_was(camera_session, tmp_path, c
     out = tmp_path / "taken"
     out.mkdir()
     (out / "mine.txt").write_text("keep")
-    done = cli("history", "export", "--format", "lerobot", "-o", str(out), "--device", "cam", "--database", str(db))
+    done = cli(
+        "history", "export", "--format", "lerobot", "-o", str(out), "--device", "cam", "--database", str(db)
+    )
     assert done.returncode == 2 and "exists" in done.stderr and len(done.stderr.splitlines()) == 1
     assert [p.name for p in tmp_path.iterdir()] == ["taken"] and (out / "mine.txt").read_text() == "keep"
 
@@ -121,12 +143,14 @@ async def main():
         hub.describe()
 asyncio.run(main())
 import wott_hub.cli
-print(json.dumps(sorted({m.split(".")[0] for m in sys.modules} & {"pyarrow", "av", "zarr", "numcodecs", "datasets"})))
+heavy = {"pyarrow", "av", "zarr", "numcodecs", "datasets"}
+print(json.dumps(sorted({m.split(".")[0] for m in sys.modules} & heavy)))
 """
 
 
 def test_the_hub_and_the_cli_load_no_export_library(tmp_path):
-    done = subprocess.run([sys.executable, "-c", LAZY, str(tmp_path / "h.db")], capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-c", LAZY, str(tmp_path / "h.db")], capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout.strip().splitlines()[-1]) == []

@@ -24,8 +24,17 @@ from ..times import parse_time
 if TYPE_CHECKING:
     from ..storage import StorageReader
 
-__all__ = ["DEFAULT_TASK", "EPISODES_THING", "EPISODE_ENDED", "EPISODE_STARTED", "MAX_TASK", "Episode",
-           "marked", "parse_episode", "task_text"]
+__all__ = [
+    "DEFAULT_TASK",
+    "EPISODES_THING",
+    "EPISODE_ENDED",
+    "EPISODE_STARTED",
+    "MAX_TASK",
+    "Episode",
+    "marked",
+    "parse_episode",
+    "task_text",
+]
 
 EPISODES_THING = "episodes"
 EPISODE_STARTED = "episodeStarted"
@@ -94,10 +103,15 @@ def marked(reader: StorageReader, t_from_ns: int | None, t_to_ns: int | None) ->
     if open_at is not None and t_to_ns is not None:
         episodes.append(Episode(open_at[0], t_to_ns, open_at[1]))
     elif open_at is not None:
-        last = max((s.last_t_ns or 0 for s in reader.things(count=False) if s.id != EPISODES_THING), default=0)
+        last = max(
+            (s.last_t_ns or 0 for s in reader.things(count=False) if s.id != EPISODES_THING), default=0
+        )
         if last > open_at[0]:
             episodes.append(Episode(open_at[0], last, open_at[1]))
     lo = t_from_ns if t_from_ns is not None else -1
     hi = t_to_ns if t_to_ns is not None else 1 << 63
-    return [Episode(max(e.start_ns, lo), min(e.end_ns, hi), e.task) for e in episodes
-            if e.end_ns >= lo and e.start_ns <= hi and max(e.start_ns, lo) < min(e.end_ns, hi)]
+    return [
+        Episode(max(e.start_ns, lo), min(e.end_ns, hi), e.task)
+        for e in episodes
+        if e.end_ns >= lo and e.start_ns <= hi and max(e.start_ns, lo) < min(e.end_ns, hi)
+    ]

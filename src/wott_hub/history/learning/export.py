@@ -15,6 +15,7 @@ time and handed to the format's writer (``lerobot.py``, ``replay_buffer.py``).
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import os
 import shutil
 from collections.abc import Callable
@@ -81,8 +82,11 @@ def _episodes(reader: StorageReader, req: DatasetRequest) -> list[Episode]:
     else:
         episodes = marked(reader, req.t_from_ns, req.t_to_ns)
         if not episodes:
-            spans = [(s.first_t_ns, s.last_t_ns) for s in reader.things(count=False)
-                     if s.id in req.things and s.first_t_ns is not None and s.last_t_ns is not None]
+            spans = [
+                (s.first_t_ns, s.last_t_ns)
+                for s in reader.things(count=False)
+                if s.id in req.things and s.first_t_ns is not None and s.last_t_ns is not None
+            ]
             if spans:
                 start = max(min(a for a, _ in spans), req.t_from_ns if req.t_from_ns is not None else 0)
                 end = min(max(b for _, b in spans), req.t_to_ns if req.t_to_ns is not None else 1 << 63)
@@ -99,8 +103,10 @@ def _episodes(reader: StorageReader, req: DatasetRequest) -> list[Episode]:
             raise InvalidInput("episodes overlap: each frame belongs to one episode")
     for e in episodes:
         if frames_of(e, req.fps) < 2:
-            raise InvalidInput(f"an episode of {(e.end_ns - e.start_ns) / 1e9:g} s has less than 2 frames at "
-                               f"{req.fps} fps (lerobot's stats need two)")
+            raise InvalidInput(
+                f"an episode of {(e.end_ns - e.start_ns) / 1e9:g} s has less than 2 frames at "
+                f"{req.fps} fps (lerobot's stats need two)"
+            )
     return episodes
 
 
@@ -120,7 +126,9 @@ def _check(reader: StorageReader, req: DatasetRequest) -> None:
         raise InvalidInput(f"{str(req.out_dir)!r}: the folder {str(req.out_dir.parent)!r} does not exist")
 
 
-def export_dataset(reader: StorageReader, req: DatasetRequest, progress: Progress | None = None) -> DatasetSummary:
+def export_dataset(
+    reader: StorageReader, req: DatasetRequest, progress: Progress | None = None
+) -> DatasetSummary:
     """Write the dataset ``req`` asks for; see the module's contract."""
     req.things = list(dict.fromkeys(req.things))
     _check(reader, req)
@@ -140,8 +148,14 @@ def export_dataset(reader: StorageReader, req: DatasetRequest, progress: Progres
     return summary
 
 
-def _write(reader: StorageReader, req: DatasetRequest, p: Plan, episodes: list[Episode], root: Path,
-           progress: Progress | None) -> DatasetSummary:
+def _write(
+    reader: StorageReader,
+    req: DatasetRequest,
+    p: Plan,
+    episodes: list[Episode],
+    root: Path,
+    progress: Progress | None,
+) -> DatasetSummary:
     from .video import CameraVideo, VideoSettings
 
     features = p.features()
@@ -167,11 +181,27 @@ def _write(reader: StorageReader, req: DatasetRequest, p: Plan, episodes: list[E
             n = frames_of(episode, req.fps)
             writer.begin(number, episode.task, n)
             done = summary.frames
-            summary.records += _episode(reader, req, p, episode, number, n, writer, done,
-                                        (lambda k: progress(done + k, total)) if progress is not None else None)
+            summary.records += _episode(
+                reader,
+                req,
+                p,
+                episode,
+                number,
+                n,
+                writer,
+                done,
+                functools.partial(_moved, progress, done, total) if progress is not None else None,
+            )
             writer.end()
-            rows.append({"episode": number, "task": episode.task, "start_ns": episode.start_ns,
-                         "end_ns": episode.end_ns, "frames": n})
+            rows.append(
+                {
+                    "episode": number,
+                    "task": episode.task,
+                    "start_ns": episode.start_ns,
+                    "end_ns": episode.end_ns,
+                    "frames": n,
+                }
+            )
             summary.frames += n
             summary.episodes += 1
         provenance = _provenance(req, p, rows)
@@ -187,8 +217,21 @@ def _write(reader: StorageReader, req: DatasetRequest, p: Plan, episodes: list[E
     return summary
 
 
-def _episode(reader: StorageReader, req: DatasetRequest, p: Plan, episode: Episode, number: int, n: int,
-             writer: Any, before: int, moved: Callable[[int], None] | None) -> int:
+def _moved(progress: Progress, before: int, total: int, frames: int) -> None:
+    progress(before + frames, total)
+
+
+def _episode(
+    reader: StorageReader,
+    req: DatasetRequest,
+    p: Plan,
+    episode: Episode,
+    number: int,
+    n: int,
+    writer: Any,
+    before: int,
+    moved: Callable[[int], None] | None,
+) -> int:
     readers = [ThingReader(reader, t.thing, t.sources, episode.start_ns, episode.end_ns) for t in p.things]
     task = writer.task_index(episode.task) if req.fmt == "lerobot" else 0
     for k0 in range(0, n, BLOCK):
@@ -207,9 +250,15 @@ def _episode(reader: StorageReader, req: DatasetRequest, p: Plan, episode: Episo
         if p.state:
             values["observation.state"] = state_values(p, values, k1 - k0)
         frame = np.arange(k0, k1, dtype=np.int64)
-        values.update({"timestamp": (frame / req.fps).astype(np.float32), "frame_index": frame,
-                       "episode_index": np.full(k1 - k0, number, np.int64), "index": before + frame,
-                       "task_index": np.full(k1 - k0, task, np.int64)})
+        values.update(
+            {
+                "timestamp": (frame / req.fps).astype(np.float32),
+                "frame_index": frame,
+                "episode_index": np.full(k1 - k0, number, np.int64),
+                "index": before + frame,
+                "task_index": np.full(k1 - k0, task, np.int64),
+            }
+        )
         if req.fmt == "lerobot":
             writer.block(values, images)
         else:
@@ -221,7 +270,13 @@ def _episode(reader: StorageReader, req: DatasetRequest, p: Plan, episode: Episo
 
 def _provenance(req: DatasetRequest, p: Plan, rows: list[dict[str, Any]]) -> dict[str, Any]:
     """``meta/wott.json`` (the zarr group's attributes): where the dataset came from, the node order."""
-    return {"exported": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"), "database": req.database,
-            "things": [t.thing for t in p.things], "fps": req.fps, "action": req.action,
-            "state": req.state, "nodes": {t.thing: t.nodes for t in p.things if t.nodes},
-            "episodes": rows}
+    return {
+        "exported": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "database": req.database,
+        "things": [t.thing for t in p.things],
+        "fps": req.fps,
+        "action": req.action,
+        "state": req.state,
+        "nodes": {t.thing: t.nodes for t in p.things if t.nodes},
+        "episodes": rows,
+    }

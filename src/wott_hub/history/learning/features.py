@@ -4,17 +4,21 @@ One source per recorded stream, each giving the features below for every frame (
 sample says, ``resample.py``), and the value before any sample (``rest``: at rest, no contact, no
 action, a black image), which is what a skin that sent nothing is:
 
-| source (record) | feature (``observation.tactile.<id>.…``) | dtype, shape | from |
-|---|---|---|---|
-| ``skinDeformedDetection`` | ``deformation`` | float32 (N,), mm | ``robotics.payloads.skin_packet``; nodes absent from a packet are at rest |
-| ``skinDisplacement`` | ``displacement`` | float32 (N, 3), mm | ``robotics.raw_signals.displacement``, in the sensor frame |
-| ``contactInformation`` | ``contact_count``, ``contact_centroid``, ``contact_force`` | int64 (1,); float32 (3,) mm; float32 (3,) N | ``robotics.payloads.contacts``: the centroid weighted by each contact's force magnitude, the net force |
-| ``actionDetection`` | ``action`` | int64 (1,): 0 none, then the TD's enum in order | the event's value |
-| ``pressureGridRecorded`` | ``pressure`` | float32 (rows, cols), kPa | the recorded grid |
-| ``rawImageRecorded`` | ``observation.images.<id>.<camera>`` | video (H, W, 3) | the recorded PNG, grey made RGB |
+- ``skinDeformedDetection`` -> ``deformation``, float32 (N,) mm (``robotics.payloads.skin_packet``;
+  nodes absent from a packet are at rest);
+- ``skinDisplacement`` -> ``displacement``, float32 (N, 3) mm in the sensor frame
+  (``robotics.raw_signals.displacement``);
+- ``contactInformation`` -> ``contact_count`` int64 (1,), ``contact_centroid`` float32 (3,) mm (weighted
+  by each contact's force magnitude), ``contact_force`` float32 (3,) N (the net force)
+  (``robotics.payloads.contacts``);
+- ``actionDetection`` -> ``action``, int64 (1,): 0 none, then the TD's enum in order;
+- ``pressureGridRecorded`` -> ``pressure``, float32 (rows, cols) kPa, the recorded grid;
+- ``rawImageRecorded`` -> ``observation.images.<id>.<camera>``, a video (H, W, 3) of the recorded PNGs,
+  grey made RGB.
 
-N is the Thing's ``skinNodes`` in their order (node ids in ``meta/wott.json``). ``--action THING.PROPERTY``
-adds ``PropertySource``: any recorded property of numbers, flattened (``action``, float32 (D,)).
+N is the Thing's ``skinNodes`` in their order (node ids in ``meta/wott.json``).
+``--action THING.PROPERTY`` adds ``PropertySource``: any recorded property of numbers, flattened
+(``action``, float32 (D,)).
 """
 
 from __future__ import annotations
@@ -37,8 +41,18 @@ if TYPE_CHECKING:
 
     from .resample import Held
 
-__all__ = ["CameraSource", "ContactsSource", "DeformationSource", "DisplacementSource", "Feature",
-           "GridSource", "PropertySource", "Source", "TouchActionSource", "block_values"]
+__all__ = [
+    "CameraSource",
+    "ContactsSource",
+    "DeformationSource",
+    "DisplacementSource",
+    "Feature",
+    "GridSource",
+    "PropertySource",
+    "Source",
+    "TouchActionSource",
+    "block_values",
+]
 
 GRID_EVENT = "pressureGridRecorded"
 IMAGE_EVENT = "rawImageRecorded"
@@ -87,11 +101,11 @@ class Source:
 
 def block_values(source: Source, held: Held) -> list[np.ndarray]:
     """The source's features at each frame of ``held``: each sample used decoded once."""
-    used = np.unique(held.index[held.index >= 0])
+    used = np.unique(held.which[held.which >= 0])
     decoded = source.decode_many([held.samples[i] for i in used.tolist()]) if len(used) else None
     where = np.zeros(len(held.samples) + 1, np.int64)  # sample index + 1 -> row of the table (0: rest)
     where[used + 1] = np.arange(1, len(used) + 1)
-    rows = where[held.index + 1]
+    rows = where[held.which + 1]
     out = []
     for j, rest in enumerate(source.rest()):
         table = rest[None] if decoded is None else np.concatenate([rest[None], decoded[j]])
@@ -132,9 +146,13 @@ def _prefix(thing: str) -> str:
 
 class DeformationSource(_NodeSource):
     def __init__(self, thing: str, geom: SkinGeometry) -> None:
-        super().__init__(thing, "skinDeformedDetection", "deformation",
-                         Feature(f"{_prefix(thing)}.deformation", "float32", (len(geom.ids),), info={"unit": "mm"}),
-                         geom)
+        super().__init__(
+            thing,
+            "skinDeformedDetection",
+            "deformation",
+            Feature(f"{_prefix(thing)}.deformation", "float32", (len(geom.ids),), info={"unit": "mm"}),
+            geom,
+        )
 
     def nodes(self, rec: Record) -> tuple[np.ndarray, np.ndarray]:
         p = skin_packet(rec.data, rec.t_ns)
@@ -143,9 +161,19 @@ class DeformationSource(_NodeSource):
 
 class DisplacementSource(_NodeSource):
     def __init__(self, thing: str, geom: SkinGeometry) -> None:
-        super().__init__(thing, DISPLACEMENT_EVENT, "displacement",
-                         Feature(f"{_prefix(thing)}.displacement", "float32", (len(geom.ids), 3),
-                                 names=["node", "axis"], info={"unit": "mm"}), geom)
+        super().__init__(
+            thing,
+            DISPLACEMENT_EVENT,
+            "displacement",
+            Feature(
+                f"{_prefix(thing)}.displacement",
+                "float32",
+                (len(geom.ids), 3),
+                names=["node", "axis"],
+                info={"unit": "mm"},
+            ),
+            geom,
+        )
 
     def nodes(self, rec: Record) -> tuple[np.ndarray, np.ndarray]:
         d = displacement(rec.data, rec.t_ns)
@@ -155,10 +183,16 @@ class DisplacementSource(_NodeSource):
 class ContactsSource(Source):
     def __init__(self, thing: str) -> None:
         p = _prefix(thing)
-        super().__init__(thing, "contactInformation", "contacts", [
-            Feature(f"{p}.contact_count", "int64", (1,), names=["count"]),
-            Feature(f"{p}.contact_centroid", "float32", (3,), names=["x", "y", "z"], info={"unit": "mm"}),
-            Feature(f"{p}.contact_force", "float32", (3,), names=["x", "y", "z"], info={"unit": "N"})])
+        super().__init__(
+            thing,
+            "contactInformation",
+            "contacts",
+            [
+                Feature(f"{p}.contact_count", "int64", (1,), names=["count"]),
+                Feature(f"{p}.contact_centroid", "float32", (3,), names=["x", "y", "z"], info={"unit": "mm"}),
+                Feature(f"{p}.contact_force", "float32", (3,), names=["x", "y", "z"], info={"unit": "N"}),
+            ],
+        )
 
     def decode(self, rec: Record) -> list[np.ndarray]:
         c = contacts(rec.data)
@@ -169,7 +203,11 @@ class ContactsSource(Source):
         if not weight.sum() > 0:
             weight = np.ones(n)
         centroid = (c.locations_mm * weight[:, None]).sum(axis=0) / weight.sum()
-        return [np.array([n], np.int64), centroid.astype(np.float32), c.forces_n.sum(axis=0).astype(np.float32)]
+        return [
+            np.array([n], np.int64),
+            centroid.astype(np.float32),
+            c.forces_n.sum(axis=0).astype(np.float32),
+        ]
 
 
 class TouchActionSource(Source):
@@ -178,9 +216,20 @@ class TouchActionSource(Source):
 
     def __init__(self, thing: str, enum: list[str]) -> None:
         self.classes = ["none", *[e for e in enum if isinstance(e, str) and e != "none"]]
-        super().__init__(thing, "actionDetection", "action",
-                         [Feature(f"{_prefix(thing)}.action", "int64", (1,), names=["action"],
-                                  info={"classes": self.classes})])
+        super().__init__(
+            thing,
+            "actionDetection",
+            "action",
+            [
+                Feature(
+                    f"{_prefix(thing)}.action",
+                    "int64",
+                    (1,),
+                    names=["action"],
+                    info={"classes": self.classes},
+                )
+            ],
+        )
 
     def decode(self, rec: Record) -> list[np.ndarray]:
         try:
@@ -195,9 +244,20 @@ class TouchActionSource(Source):
 
 class GridSource(Source):
     def __init__(self, thing: str, rows: int, cols: int) -> None:
-        super().__init__(thing, GRID_EVENT, "pressure",
-                         [Feature(f"{_prefix(thing)}.pressure", "float32", (rows, cols), names=["row", "col"],
-                                  info={"unit": "kPa"})])
+        super().__init__(
+            thing,
+            GRID_EVENT,
+            "pressure",
+            [
+                Feature(
+                    f"{_prefix(thing)}.pressure",
+                    "float32",
+                    (rows, cols),
+                    names=["row", "col"],
+                    info={"unit": "kPa"},
+                )
+            ],
+        )
 
     def decode(self, rec: Record) -> list[np.ndarray]:
         shape = self.features[0].shape
@@ -217,9 +277,19 @@ class CameraSource(Source):
     """One camera's recorded images, as the frames of a video (decoded by the video writer)."""
 
     def __init__(self, thing: str, camera: str, height: int, width: int) -> None:
-        super().__init__(thing, IMAGE_EVENT, f"camera.{camera}",
-                         [Feature(f"observation.images.{thing}.{camera}", "video", (height, width, 3),
-                                  names=["height", "width", "channels"])])
+        super().__init__(
+            thing,
+            IMAGE_EVENT,
+            f"camera.{camera}",
+            [
+                Feature(
+                    f"observation.images.{thing}.{camera}",
+                    "video",
+                    (height, width, 3),
+                    names=["height", "width", "channels"],
+                )
+            ],
+        )
         self.camera = camera
 
     def accepts(self, rec: Record) -> bool:
@@ -243,11 +313,14 @@ class CameraSource(Source):
             with Image.open(io.BytesIO(png)) as img:
                 rgb = np.asarray(img.convert("RGB"))
         except (ValueError, KeyError, TypeError, UnidentifiedImageError, OSError) as e:
-            raise InvalidInput(f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})") \
-                from None
+            raise InvalidInput(
+                f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})"
+            ) from None
         if rgb.shape != (h, w, 3):
-            raise InvalidInput(f"{self.thing}: camera {self.camera!r} changed size ({rgb.shape[1]} x {rgb.shape[0]}, "
-                               f"first {w} x {h}): a video keeps one size")
+            raise InvalidInput(
+                f"{self.thing}: camera {self.camera!r} changed size ({rgb.shape[1]} x {rgb.shape[0]}, "
+                f"first {w} x {h}): a video keeps one size"
+            )
         return rgb
 
 
@@ -258,9 +331,12 @@ class PropertySource(Source):
     def __init__(self, thing: str, name: str, first: Any) -> None:
         names = _flat_names(first, name)
         if not names:
-            raise InvalidInput(f"--action {thing}.{name}: its value holds no number ({json.dumps(first)[:80]})")
-        super().__init__(thing, name, f"action.{name}",
-                         [Feature("action", "float32", (len(names),), names=names)])
+            raise InvalidInput(
+                f"--action {thing}.{name}: its value holds no number ({json.dumps(first)[:80]})"
+            )
+        super().__init__(
+            thing, name, f"action.{name}", [Feature("action", "float32", (len(names),), names=names)]
+        )
 
     def decode(self, rec: Record) -> list[np.ndarray]:
         try:
@@ -269,8 +345,9 @@ class PropertySource(Source):
             values = []
         n = self.features[0].shape[0]
         if len(values) != n:
-            raise InvalidInput(f"--action {self.thing}.{self.name}: a value of {len(values)} numbers where the "
-                               f"first had {n}")
+            raise InvalidInput(
+                f"--action {self.thing}.{self.name}: a value of {len(values)} numbers where the first had {n}"
+            )
         return [np.asarray(values, np.float32)]
 
 

@@ -52,8 +52,14 @@ class LeRobotWriter:
     """Writes a dataset into ``root`` (a new, empty folder): ``begin``, ``block``..., ``end`` per episode,
     then ``finish``."""
 
-    def __init__(self, root: Path, fps: int, features: list[Feature], cameras: list[CameraVideo],
-                 robot_type: str | None = None) -> None:
+    def __init__(
+        self,
+        root: Path,
+        fps: int,
+        features: list[Feature],
+        cameras: list[CameraVideo],
+        robot_type: str | None = None,
+    ) -> None:
         self.root, self.fps, self.robot_type = root, fps, robot_type
         self.features = features  # the videos' too, in info.json's order
         self.columns = [f for f in features if f.dtype != "video"]
@@ -80,11 +86,19 @@ class LeRobotWriter:
     def begin(self, episode: int, task: str, frames: int) -> None:
         self._work.mkdir(parents=True, exist_ok=True)
         self._next_data_file(frames)
-        self._stats = {f.key: FeatureStats(f.dtype, f.shape, self._work / f"{i}.spill")
-                       for i, f in enumerate(self.columns)}
-        self._row = {"episode_index": episode, "tasks": [task], "length": frames,
-                     "data/chunk_index": self.chunk, "data/file_index": self.index,
-                     "dataset_from_index": self.frames, "dataset_to_index": self.frames + frames}
+        self._stats = {
+            f.key: FeatureStats(f.dtype, f.shape, self._work / f"{i}.spill")
+            for i, f in enumerate(self.columns)
+        }
+        self._row = {
+            "episode_index": episode,
+            "tasks": [task],
+            "length": frames,
+            "data/chunk_index": self.chunk,
+            "data/file_index": self.index,
+            "dataset_from_index": self.frames,
+            "dataset_to_index": self.frames + frames,
+        }
         for cam in self.cameras:
             self._row.update(cam.begin(frames))
 
@@ -93,7 +107,9 @@ class LeRobotWriter:
         import pyarrow as pa
 
         assert self._data is not None
-        self._data.write_table(pa.table([arrow_array(f, values[f.key]) for f in self.columns], schema=self.schema))
+        self._data.write_table(
+            pa.table([arrow_array(f, values[f.key]) for f in self.columns], schema=self.schema)
+        )
         for f in self.columns:
             self._stats[f.key].first(values[f.key])
         for cam, held in zip(self.cameras, images, strict=True):
@@ -161,14 +177,25 @@ class LeRobotWriter:
                 d["info"] = cam.settings.info(cam.height, cam.width, self.fps)
             features[f.key] = d
         n = len(self.episodes)
-        return {"codebase_version": CODEBASE_VERSION, "robot_type": self.robot_type, "total_episodes": n,
-                "total_frames": self.frames, "total_tasks": len(self.tasks), "chunks_size": CHUNKS_SIZE,
-                "data_files_size_in_mb": DATA_FILE_MB, "video_files_size_in_mb": VIDEO_FILE_MB, "fps": self.fps,
-                "splits": {"train": f"0:{n}"},
-                "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
-                "video_path": ("videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
-                               if self.cameras else None),
-                "features": json.loads(json.dumps(features))}
+        return {
+            "codebase_version": CODEBASE_VERSION,
+            "robot_type": self.robot_type,
+            "total_episodes": n,
+            "total_frames": self.frames,
+            "total_tasks": len(self.tasks),
+            "chunks_size": CHUNKS_SIZE,
+            "data_files_size_in_mb": DATA_FILE_MB,
+            "video_files_size_in_mb": VIDEO_FILE_MB,
+            "fps": self.fps,
+            "splits": {"train": f"0:{n}"},
+            "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
+            "video_path": (
+                "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
+                if self.cameras
+                else None
+            ),
+            "features": json.loads(json.dumps(features)),
+        }
 
     def abort(self) -> None:
         """Close what is open (the folder is removed by the caller)."""

@@ -29,15 +29,27 @@ if TYPE_CHECKING:
 
     from .features import Feature
 
-__all__ = ["CODEBASE_VERSION", "DATA_FILE_MB", "DEFAULT_FEATURES", "arrow_array", "data_path",
-           "hf_features", "write_episodes", "write_json", "write_tasks"]
+__all__ = [
+    "CODEBASE_VERSION",
+    "DATA_FILE_MB",
+    "DEFAULT_FEATURES",
+    "arrow_array",
+    "data_path",
+    "hf_features",
+    "write_episodes",
+    "write_json",
+    "write_tasks",
+]
 
 CODEBASE_VERSION = "v3.0"
 DATA_FILE_MB = 100
 CHUNKS_SIZE = 1000
 DEFAULT_FEATURES = {  # lerobot.utils.constants.DEFAULT_FEATURES, in its order
-    "timestamp": ("float32", (1,)), "frame_index": ("int64", (1,)), "episode_index": ("int64", (1,)),
-    "index": ("int64", (1,)), "task_index": ("int64", (1,)),
+    "timestamp": ("float32", (1,)),
+    "frame_index": ("int64", (1,)),
+    "episode_index": ("int64", (1,)),
+    "index": ("int64", (1,)),
+    "task_index": ("int64", (1,)),
 }
 
 
@@ -76,7 +88,9 @@ def _wrap(numbers: np.ndarray) -> pa.Array:
     """An array over the numbers' own buffer (``pa.array`` copies them, ~7 ns a number here)."""
     import pyarrow as pa
 
-    return pa.Array.from_buffers(pa.from_numpy_dtype(numbers.dtype), len(numbers), [None, pa.py_buffer(numbers)])
+    return pa.Array.from_buffers(
+        pa.from_numpy_dtype(numbers.dtype), len(numbers), [None, pa.py_buffer(numbers)]
+    )
 
 
 @functools.lru_cache(maxsize=16)
@@ -95,7 +109,7 @@ def _hf_value(f: Feature) -> dict[str, Any]:
 
 
 def hf_features(features: list[Feature]) -> dict[str, Any]:
-    """``datasets.Features.to_dict()`` of the parquet columns (what ``get_hf_features_from_features`` makes)."""
+    """``datasets.Features.to_dict()`` of the parquet columns (``get_hf_features_from_features``'s)."""
     return {f.key: _hf_value(f) for f in features if f.dtype != "video"}
 
 
@@ -104,7 +118,9 @@ def schema(features: list[Feature]) -> pa.Schema:
 
     columns = [f for f in features if f.dtype != "video"]
     meta = {"huggingface": json.dumps({"info": {"features": hf_features(columns)}})}
-    return pa.schema([pa.field(f.key, _arrow_type(f), metadata=_extension(f)) for f in columns], metadata=meta)
+    return pa.schema(
+        [pa.field(f.key, _arrow_type(f), metadata=_extension(f)) for f in columns], metadata=meta
+    )
 
 
 def _extension(f: Feature) -> dict[bytes, bytes] | None:
@@ -112,8 +128,10 @@ def _extension(f: Feature) -> dict[bytes, bytes] | None:
     extension type (``datasets`` reads it back as an Array2D; without ``datasets`` it is a list of lists)."""
     if len(f.shape) < 2:
         return None
-    return {b"ARROW:extension:name": f"datasets.features.features.Array{len(f.shape)}DExtensionType".encode(),
-            b"ARROW:extension:metadata": json.dumps([list(f.shape), f.dtype]).encode()}
+    return {
+        b"ARROW:extension:name": f"datasets.features.features.Array{len(f.shape)}DExtensionType".encode(),
+        b"ARROW:extension:metadata": json.dumps([list(f.shape), f.dtype]).encode(),
+    }
 
 
 def write_json(data: Any, path: Path) -> None:
@@ -124,20 +142,46 @@ def write_json(data: Any, path: Path) -> None:
 
 
 def write_tasks(tasks: list[str], root: Path) -> None:
-    """``meta/tasks.parquet`` as ``DataFrame({"task_index": ...}, index=Index(tasks, name="task")).to_parquet``."""
+    """``meta/tasks.parquet`` as lerobot writes it: ``DataFrame({"task_index": ...},
+    index=Index(tasks, name="task")).to_parquet``."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    pandas = {"index_columns": ["task"], "column_indexes": [{"name": None, "field_name": None,
-              "pandas_type": "unicode", "numpy_type": "object", "metadata": {"encoding": "UTF-8"}}],
-              "columns": [{"name": "task_index", "field_name": "task_index", "pandas_type": "int64",
-                           "numpy_type": "int64", "metadata": None},
-                          {"name": "task", "field_name": "task", "pandas_type": "unicode", "numpy_type": "object",
-                           "metadata": None}],
-              "attributes": {}, "creator": {"library": "pyarrow", "version": pa.__version__},
-              "pandas_version": "2.2.3"}
-    table = pa.table({"task_index": pa.array(range(len(tasks)), pa.int64()), "task": pa.array(tasks, pa.string())},
-                     metadata={"pandas": json.dumps(pandas)})
+    pandas = {
+        "index_columns": ["task"],
+        "column_indexes": [
+            {
+                "name": None,
+                "field_name": None,
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": {"encoding": "UTF-8"},
+            }
+        ],
+        "columns": [
+            {
+                "name": "task_index",
+                "field_name": "task_index",
+                "pandas_type": "int64",
+                "numpy_type": "int64",
+                "metadata": None,
+            },
+            {
+                "name": "task",
+                "field_name": "task",
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": None,
+            },
+        ],
+        "attributes": {},
+        "creator": {"library": "pyarrow", "version": pa.__version__},
+        "pandas_version": "2.2.3",
+    }
+    table = pa.table(
+        {"task_index": pa.array(range(len(tasks)), pa.int64()), "task": pa.array(tasks, pa.string())},
+        metadata={"pandas": json.dumps(pandas)},
+    )
     path = root / "meta/tasks.parquet"
     path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(table, path)

@@ -120,7 +120,9 @@ def _action(reader: StorageReader, spec: str, end_ns: int) -> tuple[str, Propert
         raise NotFound(f"--action {spec!r}: no recorded Thing {thing!r} (see `wott-hub history list`)")
     latest = _latest(reader, thing, name, end_ns)
     if not latest:
-        raise InvalidInput(f"--action {spec!r}: {thing} has no recorded {name!r} before the end of the export")
+        raise InvalidInput(
+            f"--action {spec!r}: {thing} has no recorded {name!r} before the end of the export"
+        )
     try:
         value = json.loads(latest[0].data)
     except ValueError:
@@ -135,15 +137,21 @@ def _state_names(f: Feature, thing: ThingPlan) -> list[str]:
     if len(f.shape) == 1 and f.names:
         return [f"{base}.{n}" for n in f.names]
     if len(f.shape) == 1:
-        return [f"{base}.{n}" for n in thing.nodes[:f.shape[0]]]
+        return [f"{base}.{n}" for n in thing.nodes[: f.shape[0]]]
     rows, cols = f.shape
     if f.names == ["node", "axis"]:
         return [f"{base}.{n}.{a}" for n in thing.nodes[:rows] for a in "xyz"[:cols]]
     return [f"{base}.r{r}c{c}" for r in range(rows) for c in range(cols)]
 
 
-def plan(reader: StorageReader, things: list[str], end_ns: int, *, action: str | None = None,
-         state: list[str] | None = None) -> Plan:
+def plan(
+    reader: StorageReader,
+    things: list[str],
+    end_ns: int,
+    *,
+    action: str | None = None,
+    state: list[str] | None = None,
+) -> Plan:
     """The sources and columns of an export of ``things`` whose last episode ends at ``end_ns``."""
     plans = [_thing(reader, t, end_ns) for t in things]
     if action:
@@ -155,21 +163,32 @@ def plan(reader: StorageReader, things: list[str], end_ns: int, *, action: str |
         found.sources.append(source)
     chosen: list[tuple[Feature, list[str]]] = []
     for key in state or []:
-        hits = [(f, p) for p in plans for s in p.sources for f in s.features
-                if f.dtype != "video" and not isinstance(s, PropertySource)
-                and f.key.removeprefix("observation.tactile.") in (key, f"{p.thing}.{key}")]
+        hits = [
+            (f, p)
+            for p in plans
+            for s in p.sources
+            for f in s.features
+            if f.dtype != "video"
+            and not isinstance(s, PropertySource)
+            and f.key.removeprefix("observation.tactile.") in (key, f"{p.thing}.{key}")
+        ]
         if not hits:
-            raise InvalidInput(f"--state {key!r}: no such feature (ID.FEATURE or FEATURE, e.g. contact_force; "
-                               "docs/learning.md)")
+            raise InvalidInput(
+                f"--state {key!r}: no such feature (ID.FEATURE or FEATURE, e.g. contact_force; "
+                "docs/learning.md)"
+            )
         chosen += [(f, _state_names(f, p)) for f, p in hits if all(f is not c for c, _ in chosen)]
     for p in plans:
         if not p.sources:
-            raise InvalidInput(f"{p.thing!r} has no recorded stream a dataset can hold (skin, contacts, actions, "
-                               "grids, images)")
+            raise InvalidInput(
+                f"{p.thing!r} has no recorded stream a dataset can hold (skin, contacts, actions, "
+                "grids, images)"
+            )
     for f in (f for p in plans for s in p.sources for f in s.features):
         if f.dtype != "video" and "image" in f.key:
-            raise InvalidInput(f"{f.key!r}: lerobot takes a feature whose name holds 'image' for a camera; "
-                               "rename the device")
+            raise InvalidInput(
+                f"{f.key!r}: lerobot takes a feature whose name holds 'image' for a camera; rename the device"
+            )
     return Plan(plans, chosen)
 
 

@@ -39,7 +39,7 @@ def optimal_chunks(shape: tuple[int, ...], dtype: Any, target: float = TARGET_CH
     split = len(shape) - 1
     for i in range(len(shape) - 1):
         this = itemsize * math.prod(rshape[:i])
-        following = itemsize * math.prod(rshape[:i + 1])
+        following = itemsize * math.prod(rshape[: i + 1])
         if this <= target < following:
             split = i
     rchunks = rshape[:split]
@@ -53,7 +53,7 @@ def zarr_key(feature: Feature) -> str:
     key = feature.key
     for prefix in ("observation.tactile.", "observation.images.", "observation."):
         if key.startswith(prefix):
-            key = key[len(prefix):]
+            key = key[len(prefix) :]
             break
     return key.replace(".", "_")
 
@@ -66,9 +66,13 @@ class _Array:
 
         # chunked as a long buffer would be (an hour at 30 fps), so short and long exports chunk alike
         self.chunks = optimal_chunks((108_000, *shape), dtype)
-        self.array = group.create_array(key, shape=(0, *shape), chunks=self.chunks, dtype=dtype,
-                                        compressors=numcodecs.Blosc(cname="lz4", clevel=5,
-                                                                    shuffle=numcodecs.Blosc.NOSHUFFLE))
+        self.array = group.create_array(
+            key,
+            shape=(0, *shape),
+            chunks=self.chunks,
+            dtype=dtype,
+            compressors=numcodecs.Blosc(cname="lz4", clevel=5, shuffle=numcodecs.Blosc.NOSHUFFLE),
+        )
         self.pending: list[np.ndarray] = []
         self.rows = 0
 
@@ -99,10 +103,14 @@ class ReplayBufferWriter:
         self.group = zarr.open_group(str(root), mode="w", zarr_format=2)
         data = self.group.create_group("data")
         self.columns = [f for f in features if f.dtype != "video" and f.key not in _LEROBOT_ONLY]
-        self.arrays = {f.key: _Array(data, zarr_key(f), f.shape if f.shape != (1,) else (), f.dtype)
-                       for f in self.columns}
-        self.images = [(cam, _Array(data, zarr_key(cam.source.features[0]), (cam.height, cam.width, 3), np.uint8))
-                       for cam in cameras]
+        self.arrays = {
+            f.key: _Array(data, zarr_key(f), f.shape if f.shape != (1,) else (), f.dtype)
+            for f in self.columns
+        }
+        self.images = [
+            (cam, _Array(data, zarr_key(cam.source.features[0]), (cam.height, cam.width, 3), np.uint8))
+            for cam in cameras
+        ]
         self.time = _Array(data, "timestamp", (), np.float64)
         self.ends: list[int] = []
         self.frames = 0
@@ -117,7 +125,7 @@ class ReplayBufferWriter:
         for (cam, array), held in zip(self.images, images, strict=True):
             black = np.zeros((1, cam.height, cam.width, 3), np.uint8)
             last, image = -2, black
-            for i in held.index.tolist():  # a frame at a time: a block of images would not fit in memory
+            for i in held.which.tolist():  # a frame at a time: a block of images would not fit in memory
                 if i != last:
                     last, image = i, (cam.source.image(held.samples[i])[None] if i >= 0 else black)
                 array.add(image)

@@ -39,11 +39,11 @@ def frame_times(start_ns: int, fps: int, k0: int, k1: int) -> np.ndarray:
 
 
 class Held(NamedTuple):
-    """A block of frames of one stream: ``samples`` in time order, and per frame the ``index`` of the
-    sample held (-1: none yet) and its ``age_s`` (float32 seconds, -1 with none)."""
+    """A block of frames of one stream: ``samples`` in time order, and per frame ``which`` sample is held
+    (its index, -1: none yet) and its ``age_s`` (float32 seconds, -1 with none)."""
 
     samples: list[Record]
-    index: np.ndarray
+    which: np.ndarray
     age_s: np.ndarray
 
 
@@ -85,8 +85,15 @@ class _Samples:
 class ThingReader:
     """One Thing's records in [start_ns, end_ns], read once, held block by block for each stream."""
 
-    def __init__(self, reader: StorageReader, thing: str, streams: Sequence[Stream], start_ns: int,
-                 end_ns: int, page: int = 20_000) -> None:
+    def __init__(
+        self,
+        reader: StorageReader,
+        thing: str,
+        streams: Sequence[Stream],
+        start_ns: int,
+        end_ns: int,
+        page: int = 20_000,
+    ) -> None:
         self.streams = list(streams)
         names = sorted({s.name for s in self.streams})
         self._by_name: dict[str, list[tuple[Stream, _Samples]]] = {}
@@ -96,7 +103,8 @@ class ThingReader:
             samples = self._samples[id(s)] = _Samples(before)
             self._by_name.setdefault(s.name, []).append((s, samples))
         self._pages: Iterator[list[Record]] | None = (
-            reader.pages(thing, start_ns + 1, end_ns, names, page) if names and end_ns > start_ns else None)
+            reader.pages(thing, start_ns + 1, end_ns, names, page) if names and end_ns > start_ns else None
+        )
         self._reached = start_ns
         self.records = 0
 

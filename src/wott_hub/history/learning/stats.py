@@ -9,9 +9,9 @@ q50, q90, q99 read off a histogram of 5000 bins between ``min - 1e-10`` and ``ma
 from two passes over the episode's blocks: the first finds min, max and the sums and spills the values
 to a file (raw, an episode can be an hour), the second reads them back and fills the histogram with
 those final edges, so every count, and with it every quantile, is what the one-shot call gives; the sums
-are float64 where lerobot's ``np.mean`` is float32 (the two agree to float32's rounding). An episode has at least two frames (``export.py`` refuses shorter ones): on one frame
-lerobot's ``_compute_basic_stats`` keeps every axis of a field (N x 3 stats), which its own
-``aggregate_stats`` then cannot fold with the others.
+are float64 where lerobot's ``np.mean`` is float32 (the two agree to float32's rounding). An episode
+has at least two frames (``export.py`` refuses shorter ones): on one frame lerobot's
+``_compute_basic_stats`` keeps every axis of a field (N x 3 stats), which its own ``aggregate_stats`` then cannot fold with the others.
 
 Camera images: lerobot samples ``sample_indices(frames)`` of an episode's images, keeps every
 ``int(width / 150)``-th row and column of those of 300 px or more (``auto_downsample_height_width``),
@@ -27,7 +27,7 @@ quantiles).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import BinaryIO
 
 import numpy as np
 
@@ -71,18 +71,33 @@ def _quantiles(hists: np.ndarray, edges: np.ndarray, elements: int) -> dict[str,
         inside = cum[cols, inner] - before
         left, right = edges[cols, inner], edges[cols, inner + 1]
         with np.errstate(divide="ignore", invalid="ignore"):
-            value = np.where(inside == 0, left, left + (target - before) / np.where(inside == 0, 1, inside)
-                             * (right - left))
+            value = np.where(
+                inside == 0,
+                left,
+                left + (target - before) / np.where(inside == 0, 1, inside) * (right - left),
+            )
         value = np.where(idx == 0, edges[:, 0], np.where(idx >= cum.shape[1], edges[:, -1], value))
         out[key] = value
     return out
 
 
-def _finish(lo: np.ndarray, hi: np.ndarray, mean: np.ndarray, mean_sq: np.ndarray, hists: np.ndarray,
-            edges: np.ndarray, elements: int, frames: int) -> Stats:
-    out: Stats = {"min": lo.copy(), "max": hi.copy(), "mean": mean.astype(lo.dtype),
-                  "std": np.sqrt(np.maximum(0, mean_sq - mean**2)).astype(lo.dtype),
-                  "count": np.array([frames])}
+def _finish(
+    lo: np.ndarray,
+    hi: np.ndarray,
+    mean: np.ndarray,
+    mean_sq: np.ndarray,
+    hists: np.ndarray,
+    edges: np.ndarray,
+    elements: int,
+    frames: int,
+) -> Stats:
+    out: Stats = {
+        "min": lo.copy(),
+        "max": hi.copy(),
+        "mean": mean.astype(lo.dtype),
+        "std": np.sqrt(np.maximum(0, mean_sq - mean**2)).astype(lo.dtype),
+        "count": np.array([frames]),
+    }
     out.update(_quantiles(hists, edges, elements))
     return out
 
@@ -205,9 +220,20 @@ class ImageStats:
             e = np.linspace(cmin - 1e-10, cmax + 1e-10, BINS + 1)
             edges.append(e)
             hists.append(np.histogram(levels, bins=e, weights=self.counts[c])[0])
-        st = _finish(np.array(lo), np.array(hi), np.array(mean), np.array(mean_sq), np.array(hists), np.array(edges),
-                     int(self.counts[0].sum()), self.sampled)
-        return {k: v if k == "count" else (np.asarray(v, np.float64) / 255.0).reshape(3, 1, 1) for k, v in st.items()}
+        st = _finish(
+            np.array(lo),
+            np.array(hi),
+            np.array(mean),
+            np.array(mean_sq),
+            np.array(hists),
+            np.array(edges),
+            int(self.counts[0].sum()),
+            self.sampled,
+        )
+        return {
+            k: v if k == "count" else (np.asarray(v, np.float64) / 255.0).reshape(3, 1, 1)
+            for k, v in st.items()
+        }
 
 
 def aggregate(total: dict[str, Stats] | None, episode: dict[str, Stats]) -> dict[str, Stats]:
@@ -225,9 +251,13 @@ def aggregate(total: dict[str, Stats] | None, episode: dict[str, Stats]) -> dict
             counts = np.expand_dims(counts, axis=-1)
         mean = (means * counts).sum(axis=0) / count
         variance = ((variances + (means - mean) ** 2) * counts).sum(axis=0) / count
-        agg: Stats = {"min": np.min(np.stack([s["min"] for s in parts]), axis=0),
-                      "max": np.max(np.stack([s["max"] for s in parts]), axis=0),
-                      "mean": mean, "std": np.sqrt(variance), "count": count}
+        agg: Stats = {
+            "min": np.min(np.stack([s["min"] for s in parts]), axis=0),
+            "max": np.max(np.stack([s["max"] for s in parts]), axis=0),
+            "mean": mean,
+            "std": np.sqrt(variance),
+            "count": count,
+        }
         for q in _KEYS:
             if all(q in s for s in parts):
                 agg[q] = (np.stack([s[q] for s in parts]) * counts).sum(axis=0) / count

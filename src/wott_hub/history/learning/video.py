@@ -21,7 +21,7 @@ import queue
 import threading
 from fractions import Fraction
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -57,10 +57,22 @@ class VideoSettings:
 
     def info(self, height: int, width: int, fps: int) -> dict[str, Any]:
         """The ``info`` of a video feature, as lerobot's ``get_video_info`` writes it."""
-        return {"video.height": height, "video.width": width, "video.codec": self.codec,
-                "video.pix_fmt": "yuv420p", "video.fps": fps, "video.channels": 3, "has_audio": False,
-                "video.g": self.gop, "video.crf": self.crf, "video.preset": self.preset, "video.fast_decode": 0,
-                "video.video_backend": "pyav", "video.extra_options": dict(self.extra), "is_depth_map": False}
+        return {
+            "video.height": height,
+            "video.width": width,
+            "video.codec": self.codec,
+            "video.pix_fmt": "yuv420p",
+            "video.fps": fps,
+            "video.channels": 3,
+            "has_audio": False,
+            "video.g": self.gop,
+            "video.crf": self.crf,
+            "video.preset": self.preset,
+            "video.fast_decode": 0,
+            "video.video_backend": "pyav",
+            "video.extra_options": dict(self.extra),
+            "is_depth_map": False,
+        }
 
 
 class _File:
@@ -77,8 +89,9 @@ class _File:
         self.path = path
         self.fps = fps
         self.settings = settings
-        self.container: Any = av.open(str(path), "w")
-        self.stream: Any = self.container.add_stream(settings.encoder, rate=fps, options=settings.options())
+        self.container: Any = cast(Any, av.open(str(path), "w"))
+        options = settings.options()
+        self.stream: Any = cast(Any, self.container).add_stream(settings.encoder, rate=fps, options=options)
         self.stream.pix_fmt = "yuv420p"
         self.stream.width, self.stream.height = width, height
         self.stream.time_base = Fraction(1, fps)
@@ -130,8 +143,15 @@ class _File:
 class CameraVideo:
     """One camera's video files under ``root`` (``videos/<key>/chunk-XXX/file-XXX.mp4``)."""
 
-    def __init__(self, source: CameraSource, root: Path, fps: int, settings: VideoSettings,
-                 chunks_size: int = 1000, file_mb: float = VIDEO_FILE_MB) -> None:
+    def __init__(
+        self,
+        source: CameraSource,
+        root: Path,
+        fps: int,
+        settings: VideoSettings,
+        chunks_size: int = 1000,
+        file_mb: float = VIDEO_FILE_MB,
+    ) -> None:
         self.source = source
         self.key = source.features[0].key
         self.root, self.fps, self.settings = root, fps, settings
@@ -144,7 +164,7 @@ class CameraVideo:
         self.stats: ImageStats | None = None
         self._episode_start = 0
         self._frame = 0
-        self._gop = []
+        self._gop: list[tuple[int, Any]] = []
         self._first_gop = True
         self._queue: queue.Queue[Held | None] = queue.Queue(maxsize=2)
         self._worker: threading.Thread | None = None
@@ -167,11 +187,14 @@ class CameraVideo:
         self.stats = ImageStats(frames)
         self._wanted = np.array(self.stats.wanted, np.int64)
         self._frame = 0
-        self._gop: list[tuple[int, Any]] = []
+        self._gop = []
         self._first_gop = True
         self._episode_start = self.file.frames
-        return {f"videos/{self.key}/chunk_index": self.chunk, f"videos/{self.key}/file_index": self.index,
-                f"videos/{self.key}/from_timestamp": self._episode_start / self.fps}
+        return {
+            f"videos/{self.key}/chunk_index": self.chunk,
+            f"videos/{self.key}/file_index": self.index,
+            f"videos/{self.key}/from_timestamp": self._episode_start / self.fps,
+        }
 
     def end(self) -> dict[str, Any]:
         self._queue.join()
@@ -186,7 +209,10 @@ class CameraVideo:
         if rec is None:
             if self._black is None:
                 rgb = np.zeros((self.height, self.width, 3), np.uint8)
-                self._black = (av.VideoFrame.from_ndarray(rgb, format="rgb24").reformat(format="yuv420p"), rgb)
+                self._black = (
+                    av.VideoFrame.from_ndarray(rgb, format="rgb24").reformat(format="yuv420p"),
+                    rgb,
+                )
             return self._black  # type: ignore[no-any-return]
         if self._image is None or self._image[0] != rec.seq:
             rgb = self.source.image(rec)
@@ -222,11 +248,11 @@ class CameraVideo:
     def _write(self, held: Held) -> None:
         assert self.file is not None and self.stats is not None
         first = self._frame
-        n = len(held.index)
+        n = len(held.which)
         sampled = self._wanted[(self._wanted >= first) & (self._wanted < first + n)] - first
-        picks = np.bincount(held.index[sampled] + 1, minlength=len(held.samples) + 1)
+        picks = np.bincount(held.which[sampled] + 1, minlength=len(held.samples) + 1)
         for k in range(n):
-            i = int(held.index[k])
+            i = int(held.which[k])
             rec = held.samples[i] if i >= 0 else None
             frame, rgb = self._frame_of(rec)
             if picks[i + 1]:
