@@ -11,7 +11,8 @@ to a file (raw, an episode can be an hour), the second reads them back and fills
 those final edges, so every count, and with it every quantile, is what the one-shot call gives; the sums
 are float64 where lerobot's ``np.mean`` is float32 (the two agree to float32's rounding). An episode
 has at least two frames (``export.py`` refuses shorter ones): on one frame lerobot's
-``_compute_basic_stats`` keeps every axis of a field (N x 3 stats), which its own ``aggregate_stats`` then cannot fold with the others.
+``_compute_basic_stats`` keeps every axis of a field (N x 3 stats), which its own ``aggregate_stats``
+then cannot fold with the others.
 
 Camera images: lerobot samples ``sample_indices(frames)`` of an episode's images, keeps every
 ``int(width / 150)``-th row and column of those of 300 px or more (``auto_downsample_height_width``),
