@@ -7,8 +7,8 @@ JSON Lines (the client asks again with ``after`` = the last seq until a page is 
 ``async_range`` reads a range of one skin event as arrays (``FieldRange``: the packets' nodes one
 after the other, cut by ``offsets``), resumable after any record it returned
 (``after=range.last_seq``). Forms are found by action name and ``invokeaction`` in the TD, never
-by a URL pattern, so the hub decides where they live. Times are ns since the epoch (int), a ``datetime``, or the hub's text
-forms (ISO 8601, ``-10m``, ``now``).
+by a URL pattern, so the hub decides where they live. Times are ns since the epoch (int), a
+``datetime``, or the hub's text forms (ISO 8601, ``-10m``, ``now``).
 """
 
 from __future__ import annotations
