@@ -32,8 +32,21 @@ def test_a_recorded_grid_is_exported_as_held(tmp_path, hub_thread, cli, reader_o
     first = json.loads(grids[0].data)
     assert (first["rows"], first["cols"]) == (16, 16) and first["timeStamp"] == grids[0].t_ns
     out = tmp_path / "grid"
-    done = cli("history", "export", "--format", "lerobot", "-o", str(out), "--device", "grid", "--database", str(db),
-               "--fps", "10", timeout=300)
+    done = cli(
+        "history",
+        "export",
+        "--format",
+        "lerobot",
+        "-o",
+        str(out),
+        "--device",
+        "grid",
+        "--database",
+        str(db),
+        "--fps",
+        "10",
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr
     loaded = check_lerobot(out)
     assert loaded.features["observation.tactile.grid.pressure"]["shape"] == [16, 16]
@@ -42,5 +55,9 @@ def test_a_recorded_grid_is_exported_as_held(tmp_path, hub_thread, cli, reader_o
     for k in range(len(data)):
         t = start + k * 10**9 // 10
         held = max((g for g in grids if g.t_ns <= t), key=lambda g: (g.t_ns, g.seq), default=None)
-        want = np.float32(json.loads(held.data)["pressure"]) if held is not None else np.zeros((16, 16), np.float32)
+        want = (
+            np.float32(json.loads(held.data)["pressure"])
+            if held is not None
+            else np.zeros((16, 16), np.float32)
+        )
         assert np.array_equal(data[k]["observation.tactile.grid.pressure"], want), k

@@ -349,9 +349,22 @@ def test_a_camera_a_grid_and_an_action(camera_session, tmp_path, cli, reader_of)
     assert loaded.stats[key]["mean"][0][0][0] > 0 and np.array(loaded.stats[key]["max"]).shape == (3, 1, 1)
     assert loaded.features["action"]["names"] == ["jointPositions.shoulder", "jointPositions.elbow"]
     reader = reader_of(db)
+    images = _records(reader, "cam", "rawImageRecorded")
+    for ep, start in zip(loaded.episodes, [T0, T0 + 1_500_000_000], strict=True):  # lerobot's image stats
+        n = ep["length"]
+        sampled = np.round(np.linspace(0, n - 1, min(n, 100))).astype(int)  # sample_indices below 100 frames
+        held = [_held(images, start + k * 10**9 // 20) for k in sampled]
+        pixels = np.stack(
+            [frames[images.index(h)] if h is not None else np.zeros((48, 64, 3), np.uint8) for h in held]
+        )  # 48 x 64: under 300 px, not downsampled
+        want = _episode_stats(pixels, "uint8")
+        want = {k: v if k == "count" else v / 255.0 for k, v in want.items()}
+        for stat, value in want.items():
+            got = np.asarray(ep[f"stats/{key}/{stat}"], np.float64)
+            assert got.shape == ((1,) if stat == "count" else (3, 1, 1)), stat
+            assert np.allclose(got.reshape(-1), value, rtol=1e-5, atol=1e-6), (stat, got.ravel(), value)
     arm = _records(reader, "arm", "jointPositions")
     grids = _records(reader, "cam", "pressureGridRecorded")
-    images = _records(reader, "cam", "rawImageRecorded")
     data = loaded.data.with_format("numpy")
     starts = [T0, T0 + 1_500_000_000]
     for ep, start in zip(loaded.episodes, starts, strict=True):

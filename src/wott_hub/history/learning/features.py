@@ -34,6 +34,7 @@ import numpy as np
 from wott_hub.errors import InvalidInput
 from wott_hub.robotics.payloads import contacts, skin_packet
 from wott_hub.robotics.raw_signals import DISPLACEMENT_EVENT, displacement
+from wott_hub.td.raw import PRESSURE_GRID_RECORDED, RAW_IMAGE_RECORDED
 
 if TYPE_CHECKING:
     from wott_hub.events.record import Record
@@ -54,8 +55,8 @@ __all__ = [
     "block_values",
 ]
 
-GRID_EVENT = "pressureGridRecorded"
-IMAGE_EVENT = "rawImageRecorded"
+GRID_EVENT = PRESSURE_GRID_RECORDED
+IMAGE_EVENT = RAW_IMAGE_RECORDED
 
 
 @dataclass

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -75,10 +75,6 @@ class Plan:
         return [s for s in self.sources() if isinstance(s, CameraSource)]
 
 
-def _latest(reader: StorageReader, thing: str, name: str, end_ns: int, limit: int = 1) -> list[Any]:
-    return reader.last_at(thing, name, end_ns, limit)
-
-
 def _thing(reader: StorageReader, thing: str, end_ns: int) -> ThingPlan:
     info = reader.thing_info(thing)
     if info is None:
@@ -98,12 +94,12 @@ def _thing(reader: StorageReader, thing: str, end_ns: int) -> ThingPlan:
     if "actionDetection" in events:
         enum = ((events["actionDetection"].get("data") or {}).get("enum")) or []
         out.sources.append(TouchActionSource(thing, list(enum)))
-    if GRID_EVENT in events and (grids := _latest(reader, thing, GRID_EVENT, end_ns)):
+    if GRID_EVENT in events and (grids := reader.last_at(thing, GRID_EVENT, end_ns)):
         d = json.loads(grids[0].data)
         out.sources.append(GridSource(thing, int(d["rows"]), int(d["cols"])))
     if IMAGE_EVENT in events:
         seen: dict[str, tuple[int, int]] = {}
-        for rec in _latest(reader, thing, IMAGE_EVENT, end_ns, limit=64):
+        for rec in reader.last_at(thing, IMAGE_EVENT, end_ns, limit=64):
             d = json.loads(rec.data)
             seen.setdefault(str(d.get("camera")), (int(d.get("height", 0)), int(d.get("width", 0))))
         for camera, (h, w) in sorted(seen.items()):
@@ -118,7 +114,7 @@ def _action(reader: StorageReader, spec: str, end_ns: int) -> tuple[str, Propert
         raise InvalidInput(f"--action {spec!r}: expected THING.PROPERTY (e.g. arm-1.jointPositions)")
     if not reader.recorded(thing):
         raise NotFound(f"--action {spec!r}: no recorded Thing {thing!r} (see `wott-hub history list`)")
-    latest = _latest(reader, thing, name, end_ns)
+    latest = reader.last_at(thing, name, end_ns)
     if not latest:
         raise InvalidInput(
             f"--action {spec!r}: {thing} has no recorded {name!r} before the end of the export"
