@@ -63,16 +63,15 @@ def http(live_sqlite):
 
 def test_every_served_td_is_valid_and_names_a_served_context(live, http):
     catalogue = http.get("/wot").json()
-    assert set(catalogue) == {*DEVICES, "hub", "episodes"}  # episodes: the recorded marks (docs/learning.md)
+    assert set(catalogue) == {*DEVICES, "hub"}
     for thing_id, path in catalogue.items():
         r = http.get(path)
         assert r.status_code == 200 and r.headers["content-type"].startswith("application/td+json")
         td = r.json()
-        tactile = thing_id not in ("hub", "episodes")  # the two Things of the hub itself
-        assert validate_td(td, tactile=tactile) == [], thing_id
+        assert validate_td(td, tactile=thing_id != "hub") == [], thing_id
         ctx = td["@context"]
         assert ctx[:2] == ["https://www.w3.org/2019/wot/td/v1", "https://www.w3.org/2022/wot/td/v1.1"]
-        if tactile:
+        if thing_id != "hub":
             served = httpx.get(ctx[2])
             assert served.status_code == 200 and served.json() == tactile_context()
         for kind in ("properties", "events"):

@@ -5,7 +5,8 @@ recording is one POST each (``startEpisode {"task"}``, ``endEpisode {}``: the CL
 ``wott_client``'s ``history.start_episode``), and the marks are history records like any other: the hub
 serves a Thing ``episodes``, recorded, whose events ``episodeStarted`` and ``episodeEnded`` (``{"task",
 "timeStamp"}``) say when; ``history export --format lerobot|zarr`` reads them back
-(``history/learning/episodes.py``), and a subscriber sees them live.
+(``history/learning/episodes.py``), and a subscriber sees them live. The Thing is served (and registered
+in history) at the first ``startEpisode``: a hub that marks nothing lists nothing more.
 
 One episode is open at a time: ``startEpisode`` while one is open, or ``endEpisode`` with none, is a 409
 naming the open one; a task that is not a line of 1 to 1,000 characters is a 400; a hub without
@@ -16,6 +17,7 @@ actions change what is recorded: they need the ``control`` scope.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import time
 from typing import TYPE_CHECKING, Any
@@ -114,6 +116,7 @@ class Episodes:
         self.history = history
         self.open: tuple[str, int] | None = None  # (task, start ns)
         self.served = False
+        self._lock = asyncio.Lock()  # two starts at once: one opens, the other is a 409
 
     def install(self, td: dict[str, Any], server: HubServer) -> None:
         """Declare the actions in the hub Thing's TD (before it is served) and mount their handlers."""
@@ -126,25 +129,30 @@ class Episodes:
             },
         )
 
-    async def serve(self) -> None:
-        """Serve the Thing ``episodes`` (recorded) once history is open; nothing without history."""
-        if self.history.writer is None or self.served:
-            return
-        td = json.loads(json.dumps(_TD))
-        td["id"] = f"{self.things.identity.urn}:{EPISODES_THING}"
-        await self.things.expose(EPISODES_THING, td, record=True, family="episodes")
-        self.served = True
+    async def _marks(self) -> None:
+        """Serve the Thing ``episodes`` (recorded) at the first mark: a hub that marks nothing serves and
+        records nothing more."""
+        if self.history.writer is None:
+            raise NotFound("this hub records no history (history = false): there is nothing to mark")
+        if not self.served:
+            td = json.loads(json.dumps(_TD))
+            td["id"] = f"{self.things.identity.urn}:{EPISODES_THING}"
+            await self.things.expose(EPISODES_THING, td, record=True, family="episodes")
+            self.served = True
 
     def _publish(self, name: str, task: str, t_ns: int) -> None:
-        if not self.served:
-            raise NotFound("this hub records no history (history = false): there is nothing to mark")
         data = json.dumps({"task": task, "timeStamp": t_ns}, separators=(",", ":"), ensure_ascii=False)
         self.plane.publish(EPISODES_THING, KIND_EVENT, name, t_ns, data)
 
     async def _start(self, x: dict[str, Any]) -> dict[str, Any]:
         task = task_text(x.get("task"), "'task'")
+        async with self._lock:
+            return await self._open(task)
+
+    async def _open(self, task: str) -> dict[str, Any]:
         if self.open is not None:
             raise Conflict(f"an episode is open ({self.open[0]!r}): end it first (endEpisode)")
+        await self._marks()
         t_ns = time.time_ns()
         self._publish(EPISODE_STARTED, task, t_ns)
         self.open = (task, t_ns)

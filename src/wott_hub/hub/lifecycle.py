@@ -121,7 +121,6 @@ class Hub:
         if self.config.history:
             await asyncio.to_thread(self._history.open)
             self._audit.attach(self._history.engine)  # the audit trail goes into history (audit_log)
-            await self._episodes.serve()  # the recorded Thing 'episodes' (episodes.py)
         await self._fleet.run_all()
         self._server.ctx.streams_ready.set()
         self._status.start_watching()

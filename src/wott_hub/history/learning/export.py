@@ -21,14 +21,14 @@ import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from wott_hub.errors import InvalidInput, NotFound
 
 from .episodes import DEFAULT_TASK, Episode, marked
-from .features import CameraSource, block_values
+from .features import CameraSource, Feature, block_values
 from .plan import Plan, plan, state_values
 from .resample import ThingReader, frame_times
 
@@ -68,7 +68,6 @@ class DatasetSummary:
     episodes: int = 0
     frames: int = 0
     records: int = 0
-    features: list[str] = field(default_factory=list)
 
 
 def frames_of(e: Episode, fps: int) -> int:
@@ -148,6 +147,40 @@ def export_dataset(
     return summary
 
 
+class DatasetWriter(Protocol):
+    """A format's writer (``lerobot.LeRobotWriter``, ``replay_buffer.ReplayBufferWriter``)."""
+
+    def task_index(self, task: str) -> int: ...
+
+    def begin(self, episode: int, task: str, frames: int) -> None: ...
+
+    def block(self, values: dict[str, np.ndarray], images: list[Held]) -> None:
+        """A block of frames: every column's values (``t_ns``: the frames' times), each camera's images."""
+        ...
+
+    def end(self) -> None: ...
+
+    def finish(self, provenance: dict[str, Any]) -> None: ...
+
+    def abort(self) -> None: ...
+
+
+def _writer(req: DatasetRequest, p: Plan, root: Path) -> DatasetWriter:
+    from .video import CameraVideo, VideoSettings
+
+    settings = VideoSettings(req.codec)
+    videos = [CameraVideo(cam, root, req.fps, settings) for cam in p.cameras()]
+    if req.fmt == "lerobot":
+        from .lerobot import LeRobotWriter
+        from .lerobot_files import DEFAULT_FEATURES
+
+        defaults = [Feature(k, dtype, shape) for k, (dtype, shape) in DEFAULT_FEATURES.items()]
+        return LeRobotWriter(root, req.fps, [*p.features(), *defaults], videos)
+    from .replay_buffer import ReplayBufferWriter
+
+    return ReplayBufferWriter(root, p.features(), videos)
+
+
 def _write(
     reader: StorageReader,
     req: DatasetRequest,
@@ -156,42 +189,18 @@ def _write(
     root: Path,
     progress: Progress | None,
 ) -> DatasetSummary:
-    from .video import CameraVideo, VideoSettings
-
-    features = p.features()
-    settings = VideoSettings(req.codec)
-    videos = [CameraVideo(cam, root, req.fps, settings) for cam in p.cameras()]
-    writer: Any
-    if req.fmt == "lerobot":
-        from .features import Feature
-        from .lerobot import LeRobotWriter
-        from .lerobot_files import DEFAULT_FEATURES
-
-        defaults = [Feature(k, dtype, shape) for k, (dtype, shape) in DEFAULT_FEATURES.items()]
-        writer = LeRobotWriter(root, req.fps, [*features, *defaults], videos)
-    else:
-        from .replay_buffer import ReplayBufferWriter
-
-        writer = ReplayBufferWriter(root, features, videos)
-    summary = DatasetSummary(features=[f.key for f in features])
+    writer = _writer(req, p, root)
+    summary = DatasetSummary()
     total = sum(frames_of(e, req.fps) for e in episodes)
     rows: list[dict[str, Any]] = []
     try:
         for number, episode in enumerate(episodes):
             n = frames_of(episode, req.fps)
             writer.begin(number, episode.task, n)
-            done = summary.frames
-            summary.records += _episode(
-                reader,
-                req,
-                p,
-                episode,
-                number,
-                n,
-                writer,
-                done,
-                functools.partial(_moved, progress, done, total) if progress is not None else None,
+            moved = (
+                functools.partial(_moved, progress, summary.frames, total) if progress is not None else None
             )
+            summary.records += _episode(reader, req.fps, p, episode, number, n, writer, summary.frames, moved)
             writer.end()
             rows.append(
                 {
@@ -204,13 +213,7 @@ def _write(
             )
             summary.frames += n
             summary.episodes += 1
-        provenance = _provenance(req, p, rows)
-        if req.fmt == "lerobot":
-            from .card import card
-
-            writer.finish(card(writer.info(), provenance), provenance)
-        else:
-            writer.finish(provenance)
+        writer.finish(_provenance(req, p, rows))
     except BaseException:
         writer.abort()
         raise
@@ -223,20 +226,20 @@ def _moved(progress: Progress, before: int, total: int, frames: int) -> None:
 
 def _episode(
     reader: StorageReader,
-    req: DatasetRequest,
+    fps: int,
     p: Plan,
     episode: Episode,
     number: int,
     n: int,
-    writer: Any,
+    writer: DatasetWriter,
     before: int,
     moved: Callable[[int], None] | None,
 ) -> int:
     readers = [ThingReader(reader, t.thing, t.sources, episode.start_ns, episode.end_ns) for t in p.things]
-    task = writer.task_index(episode.task) if req.fmt == "lerobot" else 0
+    task = writer.task_index(episode.task)
     for k0 in range(0, n, BLOCK):
         k1 = min(n, k0 + BLOCK)
-        times = frame_times(episode.start_ns, req.fps, k0, k1)
+        times = frame_times(episode.start_ns, fps, k0, k1)
         values: dict[str, np.ndarray] = {}
         images: list[Held] = []
         for t, tr in zip(p.things, readers, strict=True):
@@ -246,23 +249,21 @@ def _episode(
                     images.append(h)
                 else:
                     values.update(zip((f.key for f in source.features), block_values(source, h), strict=True))
-            values[t.age.key] = np.stack([h.age_s for h in held], axis=1) if held else np.zeros((k1 - k0, 0))
+            values[t.age.key] = np.stack([h.age_s for h in held], axis=1)
         if p.state:
             values["observation.state"] = state_values(p, values, k1 - k0)
         frame = np.arange(k0, k1, dtype=np.int64)
         values.update(
             {
-                "timestamp": (frame / req.fps).astype(np.float32),
+                "timestamp": (frame / fps).astype(np.float32),
                 "frame_index": frame,
                 "episode_index": np.full(k1 - k0, number, np.int64),
                 "index": before + frame,
                 "task_index": np.full(k1 - k0, task, np.int64),
+                "t_ns": times,
             }
         )
-        if req.fmt == "lerobot":
-            writer.block(values, images)
-        else:
-            writer.block(values, images, times)
+        writer.block(values, images)
         if moved is not None:
             moved(k1)
     return sum(tr.records for tr in readers)

@@ -151,8 +151,10 @@ class LeRobotWriter:
 
     # --- the end ------------------------------------------------------------------------------
 
-    def finish(self, card: str, provenance: dict[str, Any]) -> None:
+    def finish(self, provenance: dict[str, Any]) -> None:
         """Close the files and write the meta folder and the card."""
+        from .card import card
+
         if self._data is not None:
             self._data.close()
             self._data = None
@@ -165,7 +167,7 @@ class LeRobotWriter:
         write_json(serialised(self.stats or {}), self.root / "meta/stats.json")
         write_json(self.info(), self.root / "meta/info.json")
         write_json(provenance, self.root / "meta/wott.json")
-        (self.root / "README.md").write_text(card, encoding="utf-8")
+        (self.root / "README.md").write_text(card(self.info(), provenance), encoding="utf-8")
 
     def info(self) -> dict[str, Any]:
         """``meta/info.json``: the keys of lerobot's ``create_empty_dataset_info``, in its order."""

@@ -115,10 +115,14 @@ class ReplayBufferWriter:
         self.ends: list[int] = []
         self.frames = 0
 
+    def task_index(self, task: str) -> int:
+        """Tasks have no column here: they are in the group's attributes, with the episodes."""
+        return 0
+
     def begin(self, episode: int, task: str, frames: int) -> None:
         self.frames += frames
 
-    def block(self, values: dict[str, np.ndarray], images: list[Held], times_ns: np.ndarray) -> None:
+    def block(self, values: dict[str, np.ndarray], images: list[Held]) -> None:
         for f in self.columns:
             v = values[f.key]
             self.arrays[f.key].add(v.reshape(len(v)) if f.shape == (1,) else v)
@@ -129,7 +133,7 @@ class ReplayBufferWriter:
                 if i != last:
                     last, image = i, (cam.source.image(held.samples[i])[None] if i >= 0 else black)
                 array.add(image)
-        self.time.add(times_ns / 1e9)
+        self.time.add(values["t_ns"] / 1e9)
 
     def end(self) -> None:
         self.ends.append(self.frames)
