@@ -247,6 +247,7 @@ def main() -> None:
     load_after = os.getloadavg()
     expected = int(args.minutes * 60 * FPS)
     assert rows == expected and frames == expected, (rows, frames, expected)
+    said = err.strip().rpartition(" in ")[0]  # "1 episode, N frames (M records)", without the temporary path
     hour = "one hour" if scale == 1 else f"{args.minutes:g} min, scaled x{scale:g} to one hour"
     table = markdown_table(
         [
@@ -277,7 +278,7 @@ The demo's three skins at {FPS} frames/s (skin packet, displacement packet and c
 action every 2 s) and a 640 x 480 camera recording {args.camera_hz:g} image/s, written through
 `HistoryWriter` into SQLite ({db_mb * scale:.0f} MB an hour, built in {build_s:.0f} s), exported whole by
 the command (one episode, {args.codec}, a process of its own; peak RSS from `wait4`, not scaled: it does
-not grow with the hour). Target: ≤ 60 s an hour, memory bounded. The command said: {err.strip()}
+not grow with the hour). Target: ≤ 60 s an hour, memory bounded. The command said: {said}
 
 {table}
 

@@ -64,7 +64,5 @@ def export_dataset(
     )
     with Bar(f"{fmt} {', '.join(devices)}", 1, wanted(progress)) as bar:
         summary = learning.export_dataset(reader, req, bar.update)
-    typer.echo(
-        f"{summary.episodes} episodes, {summary.frames} frames ({summary.records} records) in {output}",
-        err=True,
-    )
+    episodes = f"{summary.episodes} episode{'s' if summary.episodes != 1 else ''}"
+    typer.echo(f"{episodes}, {summary.frames} frames ({summary.records} records) in {output}", err=True)
