@@ -64,5 +64,5 @@ def export_dataset(
     )
     with Bar(f"{fmt} {', '.join(devices)}", 1, wanted(progress)) as bar:
         summary = learning.export_dataset(reader, req, bar.update)
-    episodes = f"{summary.episodes} episode{'s' if summary.episodes != 1 else ''}"
-    typer.echo(f"{episodes}, {summary.frames} frames ({summary.records} records) in {output}", err=True)
+    counted = f"{summary.episodes} episode{'s' if summary.episodes != 1 else ''}"
+    typer.echo(f"{counted}, {summary.frames} frames ({summary.records} records) in {output}", err=True)
