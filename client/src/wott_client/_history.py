@@ -2,12 +2,13 @@
 
 ``historyDevices`` lists what is recorded, ``historyRecords`` pages a device's range as
 JSON Lines (the client asks again with ``after`` = the last seq until a page is short),
-``historyExport`` returns an MCAP file (docs/history.md of wott-hub). ``async_range`` reads a
-range of one skin event as arrays (``FieldRange``: the packets' nodes one after the other, cut by
-``offsets``), resumable after any record it returned (``after=range.last_seq``). Forms are found
-by action name and ``invokeaction`` in the TD, never by a URL pattern, so the hub decides
-where they live. Times are ns since the epoch (int), a ``datetime``, or the hub's text
-forms (ISO 8601, ``-10m``, ``now``).
+``historyExport`` returns an MCAP file (docs/history.md of wott-hub); ``startEpisode`` and
+``endEpisode`` mark the episodes a learning export cuts the recording into (docs/learning.md).
+``async_range`` reads a range of one skin event as arrays (``FieldRange``: the packets' nodes one
+after the other, cut by ``offsets``), resumable after any record it returned
+(``after=range.last_seq``). Forms are found by action name and ``invokeaction`` in the TD, never
+by a URL pattern, so the hub decides where they live. Times are ns since the epoch (int), a
+``datetime``, or the hub's text forms (ISO 8601, ``-10m``, ``now``).
 """
 
 from __future__ import annotations
@@ -140,6 +141,11 @@ class AsyncHistory:
             raise TransportError(f"{action}: HTTP {resp.status_code}: {_problem(resp)}")
 
     async def _post(self, action: str, body: dict[str, Any]) -> httpx.Response:
+        if action not in self._forms:  # an action a hub may not have (episodes: a hub without history)
+            form = find_form(self.td, "invokeaction", "actions", action, self.url)
+            if form is None:
+                raise InvalidTD(f"{self.url or 'TD'}: no {action!r} action with an HTTP form")
+            self._forms[action] = form.href
         try:
             resp = await self._http.post(self._forms[action], json=body)
         except httpx.HTTPError as e:
@@ -205,6 +211,17 @@ class AsyncHistory:
             if len(got) < n:
                 break
         return _range_of(device, name, records)
+
+    async def async_start_episode(self, task: str) -> dict[str, Any]:
+        """Start an episode of the recording (the hub's ``startEpisode``): ``{"task", "from"}`` (ns). One
+        at a time: a second start is a ``TransportError`` (HTTP 409) naming the open one."""
+        started: dict[str, Any] = (await self._post("startEpisode", {"task": task})).json()
+        return started
+
+    async def async_end_episode(self) -> dict[str, Any]:
+        """End the open episode (``endEpisode``): ``{"task", "from", "to"}`` (ns)."""
+        ended: dict[str, Any] = (await self._post("endEpisode", {})).json()
+        return ended
 
     async def async_export_mcap(self, path: str | os.PathLike[str], devices: Sequence[str] | str, *,
                                 t_from: Time = None, t_to: Time = None, names: Sequence[str] | None = None,

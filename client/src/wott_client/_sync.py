@@ -196,6 +196,14 @@ class History:
         return self._loop.run(self.aio.async_range(device, name, t_from=t_from, t_to=t_to, after=after,
                                                    limit=limit))
 
+    def start_episode(self, task: str) -> dict[str, Any]:
+        """Start an episode of the recording (``AsyncHistory.async_start_episode``)."""
+        return self._loop.run(self.aio.async_start_episode(task))
+
+    def end_episode(self) -> dict[str, Any]:
+        """End the open episode (``AsyncHistory.async_end_episode``)."""
+        return self._loop.run(self.aio.async_end_episode())
+
     def export_mcap(self, path: str | os.PathLike[str], devices: Sequence[str] | str, *, t_from: Time = None,
                     t_to: Time = None, names: Sequence[str] | None = None, scene: bool = True,
                     scene_hz: float = 30.0) -> int:

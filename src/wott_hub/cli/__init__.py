@@ -21,7 +21,7 @@ from typer.core import TyperGroup
 if TYPE_CHECKING:
     from typer import _click  # typer vendors click: TyperGroup.invoke takes its (unexported) Context
 
-from . import bench, config, devices, directory, discover, history, plugins, replay, run, td, tokens
+from . import bench, config, devices, directory, discover, episode, history, plugins, replay, run, td, tokens
 
 __all__ = ["app", "main"]
 
@@ -96,6 +96,7 @@ app.registered_commands += bench.app.registered_commands
 app.registered_commands += run.app.registered_commands
 app.add_typer(config.app, name="config")
 app.add_typer(history.app, name="history")
+app.add_typer(episode.app, name="episode")
 app.add_typer(tokens.app, name="tokens")
 app.add_typer(tokens.tls_app, name="tls")
 app.registered_commands += replay.app.registered_commands

@@ -56,9 +56,13 @@ class Bar:
         if self._progress is not None:
             self._progress.stop()
 
-    def update(self, done: int) -> None:
+    def update(self, done: int, total: int | None = None) -> None:
+        """``done`` steps (of ``total``, when it is known only now)."""
         if self._progress is not None and self._task is not None:
-            self._progress.update(self._task, completed=done)
+            if total:
+                self._progress.update(self._task, completed=done, total=total)
+            else:
+                self._progress.update(self._task, completed=done)
 
 
 class Tracked:

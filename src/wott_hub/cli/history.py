@@ -1,4 +1,5 @@
-"""``wott-hub history``: what is recorded, export a range as JSON Lines or MCAP, the audit trail.
+"""``wott-hub history``: what is recorded, export a range (JSON Lines, MCAP, rosbag2, learning datasets),
+the audit trail.
 
 ``list`` reads only the ends of each device's indexes (its first and last seq and time), so
 it answers as fast on a day of history as on a minute; the exact number of records is a scan
@@ -82,8 +83,21 @@ def export(
     name: list[str] = typer.Option(None, "--name", help="Only these affordances (repeatable)."),
     output: Path = typer.Option(None, "--output", "-o", help="File to write (default: standard output; "
                                 "required for mcap), or the new folder of a rosbag2."),
-    fmt: str = typer.Option("jsonl", "--format", help="jsonl (one record per line), mcap (Foxglove) or "
-                            "rosbag2 (ROS 2: `ros2 bag play DIR`; docs/robotics.md)."),
+    fmt: str = typer.Option("jsonl", "--format", help="jsonl (one record per line), mcap (Foxglove), "
+                            "rosbag2 (ROS 2: `ros2 bag play DIR`; docs/robotics.md), lerobot (LeRobotDataset "
+                            "v3.0) or zarr (diffusion-policy replay buffer; docs/learning.md)."),
+    fps: int = typer.Option(30, "--fps", help="lerobot, zarr: frames per second of the dataset (1-1000)."),
+    episodes: list[str] = typer.Option(None, "--episodes", help="lerobot, zarr: an episode FROM..TO or "
+                                       "FROM..TO=TASK (repeatable; default: those marked while recording, "
+                                       "else the whole range)."),
+    task: str = typer.Option(None, "--task", help="lerobot, zarr: the task of an episode given without "
+                             "one."),
+    state: list[str] = typer.Option(None, "--state", help="lerobot, zarr: also flatten this feature into "
+                                    "observation.state (ID.FEATURE or FEATURE, e.g. contact_force; "
+                                    "repeatable)."),
+    action: str = typer.Option(None, "--action", help="lerobot, zarr: THING.PROPERTY, a recorded property "
+                               "of another Thing as the action column."),
+    codec: str = typer.Option("h264", "--codec", help="lerobot: camera videos as h264 or av1."),
     scene: bool = typer.Option(True, "--scene/--no-scene", help="mcap: Foxglove scene channels (mesh, "
                                "deformation)."),
     scene_hz: float = typer.Option(30.0, "--scene-hz", help="mcap: deformation scenes per second at most."),
@@ -94,7 +108,15 @@ def export(
     database: str = _DB,
     config: Path = _CFG,
 ) -> None:
-    """Write devices' records in a time range as JSON Lines (in order) or as an MCAP file."""
+    """Write devices' records in a time range as JSON Lines (in order), an MCAP file, a rosbag2 folder or a
+    learning dataset (LeRobot, zarr)."""
+    if fmt in ("lerobot", "zarr"):
+        from ._learning import export_dataset
+
+        export_dataset(fmt, device, t_from, t_to, output, database, config, fps=fps,
+                       episodes=episodes or [], task=task, state=state or [], action=action, codec=codec,
+                       progress=progress, check=check)
+        return
     n = _export(device, t_from, t_to, name, output, database, config, fmt=fmt, scene=scene, scene_hz=scene_hz,
                 progress=progress, check=check)
     typer.echo(f"{n} records", err=True)
@@ -111,7 +133,7 @@ def _export(devices: list[str] | str, t_from: str | None, t_to: str | None, name
 
     devices = [devices] if isinstance(devices, str) else list(devices)
     if fmt not in ("jsonl", "mcap", "rosbag2"):
-        raise InvalidInput(f"--format {fmt!r}: expected jsonl, mcap or rosbag2")
+        raise InvalidInput(f"--format {fmt!r}: expected jsonl, mcap, rosbag2, lerobot or zarr")
     if fmt in ("mcap", "rosbag2") and output is None:
         raise InvalidInput(f"--output is required with --format {fmt} (binary, not for a terminal)")
     if not (math.isfinite(scene_hz) and scene_hz > 0):

@@ -275,6 +275,21 @@ class HistoryReader:
             rows = conn.execute(q.order_by(_E.c.seq).limit(limit)).all()
         return _columns(rows).records(thing) if rows else []
 
+    @_guarded
+    def last_at(self, thing: str, name: str, t_ns: int, limit: int = 1) -> list[Record]:
+        """One step back along ``ix_events_thing_time`` from ``t_ns``, the name filtered as it goes: a
+        few index entries for a name recorded often, a scan back to the Thing's first record for one
+        never recorded before ``t_ns``."""
+        key = self.key(thing)
+        if key is None:
+            return []
+        q = (sa.select(_E.c.seq, _E.c.t_ns, _E.c.kind, _E.c.name, _E.c.data)
+             .where(_E.c.thing_key == key, _E.c.t_ns <= t_ns, _E.c.name == name)
+             .order_by(_E.c.t_ns.desc(), _E.c.seq.desc()).limit(limit))
+        with self.engine.connect() as conn:
+            rows = conn.execute(q).all()
+        return _columns(rows).records(thing) if rows else []
+
     def pages(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
               names: list[str] | None = None, page: int = 20_000) -> Iterator[list[Record]]:
         for cols in self.columns(thing, t_from_ns, t_to_ns, names, page):

@@ -157,3 +157,8 @@ class StorageReader(Protocol):
                     names: list[str] | None = None, after: int = 0, limit: int = 1000) -> list[Record]:
         """Up to ``limit`` of those records with seq > ``after``; ``NotFound`` for a Thing never recorded."""
         ...
+
+    def last_at(self, thing: str, name: str, t_ns: int, limit: int = 1) -> list[Record]:
+        """The ``limit`` latest records of ``name`` at or before ``t_ns``, latest first (a zero-order
+        hold's value at ``t_ns``)."""
+        ...

@@ -40,6 +40,7 @@ from wott_hub.servient import HUB_THING_ID, HubServer, ServedThing, hub_td
 
 from .device_actions import DeviceActions
 from .devices import DeviceRuntime, Devices
+from .episodes import Episodes
 from .history_api import install as install_history_api
 from .identity import hub_identity
 from .management import FleetManagement
@@ -81,6 +82,7 @@ class Hub:
         self._things = Things(self._plane, self._server, self._history, self._identity)
         self._fleet = Devices(cfg, self._plane, self._things, self._history)
         self._replay = Replays(cfg, self._plane, self._things, self._history)
+        self._episodes = Episodes(self._plane, self._things, self._history)  # startEpisode/endEpisode
         # device actions and the hub Thing's addDevice/removeDevice/restartDevice (management.py)
         self._management = FleetManagement(cfg, self._fleet, DeviceActions(self._fleet, self._plane))
         self._status = HubStatus(self._plane, self._fleet, self._replay, self._history, lambda: self.state)
@@ -111,6 +113,7 @@ class Hub:
         td["id"] = self._identity.hub_thing_id
         self._replay.install(td)  # the replay/stopReplay actions (replay.py)
         install_history_api(td, self._server, self._history)  # historyDevices/Records/Export
+        self._episodes.install(td, self._server)
         self._management.install(td)  # fleet actions, and every device's actions (management.py)
         self._status.expose(self._things, td)
         await self._fleet.open_configured()
@@ -130,6 +133,7 @@ class Hub:
         if self.state == "stopped":
             return
         self.state = "stopping"
+        self._episodes.end()  # an open episode ends before anything stops recording
         self._fleet.live = False
         if self._mqtt is not None:  # retained state cleared first: a stop cut short leaves none stale
             await self._mqtt.withdraw()

@@ -56,6 +56,8 @@ class Things:
         td = with_forms(td, thing_id, self.server.layout)
         record = record and self.history.writer is not None
         served = ServedThing.create(thing_id, td, static_values, dynamic, record=record)
-        start_after = await self.history.register(served, family) if record else None
-        self.serve(served, start_after)
+        # served first, as a device is: history records the TD the servient serves (its security written)
+        self.serve(served)
+        if record:
+            await self.history.attach(served, family)
         return served

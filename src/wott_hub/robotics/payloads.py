@@ -12,11 +12,12 @@ from __future__ import annotations
 import json
 from typing import Any, NamedTuple
 
+import msgspec
 import numpy as np
 
 from wott_hub.errors import InvalidInput
 
-__all__ = ["Contacts", "SkinPacket", "action_text", "contacts", "skin_packet"]
+__all__ = ["Contacts", "SkinPacket", "action_text", "contacts", "load_json", "skin_packet"]
 
 
 class SkinPacket(NamedTuple):
@@ -30,11 +31,20 @@ class Contacts(NamedTuple):
     forces_n: np.ndarray  # N x 3
 
 
-def _load(text: str) -> Any:
+def load_json(text: str) -> Any:
+    """A payload's value: msgspec's decoder (~4x faster than ``json``'s: exports read a million payloads
+    an hour), ``json``'s for what strict JSON refuses and Python reads (``NaN``, ``Infinity``)."""
+    try:
+        return msgspec.json.decode(text)
+    except msgspec.DecodeError:
+        pass
     try:
         return json.loads(text)
     except ValueError as e:
         raise InvalidInput(f"not JSON: {e}") from None
+
+
+_load = load_json
 
 
 def skin_packet(text: str, t_ns: int) -> SkinPacket:

@@ -17,12 +17,13 @@ with a small, visible addition:
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 
 import numpy as np
 
 from wott_hub.errors import InvalidInput
+
+from .payloads import load_json
 
 __all__ = ["DISPLACEMENT_EVENT", "Displacement", "ImageFrame", "TaxelGrid", "displacement"]
 
@@ -44,13 +45,13 @@ class Displacement:
 def displacement(text: str, t_ns: int) -> Displacement:
     """A ``skinDisplacement`` record's nodes; its ``timeStamp``, else the record's time."""
     try:
-        d = json.loads(text)
+        d = load_json(text)
         nodes = d["arrayOfDisplacedNodes"]
         ids = np.array([int(n["nodeID"]) for n in nodes], dtype=np.int64)
         disp = np.array([(n["displacement"]["x"], n["displacement"]["y"], n["displacement"]["z"])
                          for n in nodes], dtype=np.float64).reshape(-1, 3)
         return Displacement(int(d.get("timeStamp", t_ns)), ids, disp)
-    except (ValueError, KeyError, TypeError) as e:
+    except (ValueError, KeyError, TypeError) as e:  # InvalidInput is a ValueError
         raise InvalidInput(f"not a {DISPLACEMENT_EVENT} packet ({e!r})") from None
 
 

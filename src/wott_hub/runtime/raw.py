@@ -14,8 +14,8 @@ uint8, a grid rows x cols float32). An image of the wrong dtype or shape from a 
 ``DriverError`` naming the device: the reader gets a 502, the device and the hub carry on.
 
 ``RawRecorder``: a device that opted in (``RawSignal.record_hz``) has its images published as
-``rawImageRecorded`` events at that rate, each a base64 PNG (so recorded and replayed as any
-event), while the device runs.
+``rawImageRecorded`` events at that rate, each a base64 PNG, and its grid as ``pressureGridRecorded``
+(its JSON form), so recorded and replayed as any event, while the device runs.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import numpy as np
 from wott_hub.errors import DriverError
 from wott_hub.events.record import KIND_EVENT, Record
 from wott_hub.tactile.raw import IMAGE, RawSample, RawSignal
-from wott_hub.td.raw import RAW_IMAGE_RECORDED
+from wott_hub.td.raw import PRESSURE_GRID_RECORDED, RAW_IMAGE_RECORDED
 
 if TYPE_CHECKING:
     from PIL.Image import Image
@@ -171,8 +171,8 @@ class RawSource:
 
 
 class RawRecorder:
-    """Publishes the images of the cameras that opted in (``record_hz`` > 0) as ``rawImageRecorded``
-    events into ``sink``, each camera at its rate, until cancelled."""
+    """Publishes the signals that opted in (``record_hz`` > 0) into ``sink``, each at its rate, until
+    cancelled: images as ``rawImageRecorded``, grids as ``pressureGridRecorded``."""
 
     def __init__(self, thing: str, source: RawSource, sink: RecordSink) -> None:
         self.thing = thing
@@ -182,12 +182,12 @@ class RawRecorder:
 
     @property
     def signals(self) -> list[RawSignal]:
-        return [s for s in self.source.signals if s.kind == IMAGE and s.record_hz > 0]
+        return [s for s in self.source.signals if s.record_hz > 0]
 
     async def run(self) -> None:
-        await asyncio.gather(*(self._camera(s) for s in self.signals))
+        await asyncio.gather(*(self._signal(s) for s in self.signals))
 
-    async def _camera(self, signal: RawSignal) -> None:
+    async def _signal(self, signal: RawSignal) -> None:
         period = 1.0 / signal.record_hz
         last = -1
         loop = asyncio.get_running_loop()
@@ -196,13 +196,19 @@ class RawRecorder:
             due += period
             await asyncio.sleep(max(0.0, due - loop.time()))
             try:
-                enc = await self.source.read(signal.name, "png")
+                enc = await self.source.read(signal.name, "png" if signal.kind == IMAGE else "json")
             except DriverError as e:
                 log.warning("%s: not recorded: %s", self.thing, e)
                 continue
             if enc is None or enc.t_ns == last:  # no frame yet, or none since the last recorded
                 continue
             last = enc.t_ns
+            if signal.kind != IMAGE:  # a grid: its JSON form as it is
+                if self.sink.wants(self.thing, KIND_EVENT, PRESSURE_GRID_RECORDED):
+                    self.sink.put(Record(self.thing, 0, KIND_EVENT, PRESSURE_GRID_RECORDED, enc.t_ns,
+                                         enc.body.decode()))
+                    self.recorded += 1
+                continue
             if not self.sink.wants(self.thing, KIND_EVENT, RAW_IMAGE_RECORDED):
                 continue
             h, w, c = _shape_of_png(enc.body)

@@ -30,7 +30,7 @@ class RawSignal:
     ``pressure``); ``kind``: ``"image"`` (H x W x C uint8, C 1 grey or 3 RGB) or ``"grid"``
     (rows x cols float, ``unit``); ``shape``: (H, W) or (rows, cols), () when not known before the
     first frame (a real camera); ``rate_hz``: the device's frame rate (0: unknown);
-    ``record_hz``: record a sample this often in history (0: never, the default; images only).
+    ``record_hz``: record a sample this often in history (0: never, the default).
     """
 
     name: str

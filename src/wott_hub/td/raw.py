@@ -10,7 +10,9 @@ stream. ``uriVariables`` name the camera and the stream's rate (``maxRate``, per
 checked by the hub (a 400 problem+json naming the parameter).
 
 A device that records its images (``RawSignal.record_hz``) also declares the event
-``rawImageRecorded``: one recorded image (base64 PNG), replayed with the rest of history.
+``rawImageRecorded``: one recorded image (base64 PNG), replayed with the rest of history; one that
+records its grid, ``pressureGridRecorded`` (the grid's JSON form), which learning exports read
+(docs/learning.md).
 """
 
 from __future__ import annotations
@@ -19,12 +21,13 @@ from typing import Any
 
 from wott_hub.tactile.raw import GRID, IMAGE, RawSignal
 
-__all__ = ["DEFAULT_RATE_HZ", "MAX_RATE_HZ", "PRESSURE_GRID", "RAW_IMAGE", "RAW_IMAGE_RECORDED", "RAW_TYPES",
-           "raw_affordances", "raw_events"]
+__all__ = ["DEFAULT_RATE_HZ", "MAX_RATE_HZ", "PRESSURE_GRID", "PRESSURE_GRID_RECORDED", "RAW_IMAGE",
+           "RAW_IMAGE_RECORDED", "RAW_TYPES", "raw_affordances", "raw_events"]
 
 RAW_IMAGE = "rawImage"
 PRESSURE_GRID = "pressureGrid"
 RAW_IMAGE_RECORDED = "rawImageRecorded"
+PRESSURE_GRID_RECORDED = "pressureGridRecorded"
 RAW_TYPES = frozenset({"tac:RawImage", "tac:PressureGrid"})
 """The ``@type`` of a raw-signal property: live only (a replay's TD leaves them out)."""
 
@@ -99,25 +102,37 @@ def raw_affordances(signals: tuple[RawSignal, ...]) -> dict[str, dict[str, Any]]
 
 
 def raw_events(signals: tuple[RawSignal, ...]) -> dict[str, dict[str, Any]]:
-    """``rawImageRecorded`` for a device that records images (a camera with ``record_hz`` > 0)."""
+    """``rawImageRecorded`` for a device that records images (a camera with ``record_hz`` > 0),
+    ``pressureGridRecorded`` for one that records its grid."""
+    out: dict[str, dict[str, Any]] = {}
     recorded = [s.name for s in signals if s.kind == IMAGE and s.record_hz > 0]
-    if not recorded:
-        return {}
-    return {RAW_IMAGE_RECORDED: {
-        "@type": "tac:RawImageRecorded",
-        "title": RAW_IMAGE_RECORDED,
-        "description": ("A camera image recorded in history (the device opted in: record_raw_hz), a base64 "
-                        "PNG, replayed with the rest of the device's records."),
-        "data": {
-            "type": "object",
-            "properties": {
-                "timeStamp": {"type": "integer", "minimum": 0, "unit": "ns"},
-                "camera": {"type": "string", "enum": recorded},
-                "width": {"type": "integer", "minimum": 0},
-                "height": {"type": "integer", "minimum": 0},
-                "channels": {"type": "integer", "minimum": 1},
-                "image": {"type": "string", "contentEncoding": "base64", "contentMediaType": "image/png"},
+    if recorded:
+        out[RAW_IMAGE_RECORDED] = {
+            "@type": "tac:RawImageRecorded",
+            "title": RAW_IMAGE_RECORDED,
+            "description": ("A camera image recorded in history (the device opted in: record_raw_hz), a "
+                            "base64 PNG, replayed with the rest of the device's records."),
+            "data": {
+                "type": "object",
+                "properties": {
+                    "timeStamp": {"type": "integer", "minimum": 0, "unit": "ns"},
+                    "camera": {"type": "string", "enum": recorded},
+                    "width": {"type": "integer", "minimum": 0},
+                    "height": {"type": "integer", "minimum": 0},
+                    "channels": {"type": "integer", "minimum": 1},
+                    "image": {"type": "string", "contentEncoding": "base64", "contentMediaType": "image/png"},
+                },
+                "required": ["timeStamp", "camera", "image"],
             },
-            "required": ["timeStamp", "camera", "image"],
-        },
-    }}
+        }
+    grids = [s for s in signals if s.kind == GRID and s.record_hz > 0]
+    if grids:
+        schema = _grid(grids[0])
+        out[PRESSURE_GRID_RECORDED] = {
+            "@type": "tac:PressureGridRecorded",
+            "title": PRESSURE_GRID_RECORDED,
+            "description": ("A pressure grid recorded in history (the device opted in: record_raw_hz), as "
+                            "pressureGrid's JSON form, replayed with the rest of the device's records."),
+            "data": {k: schema[k] for k in ("type", "properties", "required")},
+        }
+    return out

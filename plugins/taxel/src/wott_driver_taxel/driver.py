@@ -14,7 +14,9 @@ themselves, which bunch and stretch with the reads; each ``frames()`` call start
 a new line.
 
 Raw signal (``ServesRawSignals``): the pressure grid, rows x cols kPa, the last frame's
-(a reference to the array the frame carries, reshaped as a view when read).
+(a reference to the array the frame carries, reshaped as a view when read); recorded in history as
+``pressureGridRecorded`` events ``record_hz`` times a second when the device opts in
+(``record_raw_hz``: learning exports read it, docs/learning.md of wott-hub).
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ class TaxelDriver(Driver, Tareable, ServesRawSignals):
         simulator: TaxelSimulator | None = None,
         backoff: Backoff | None = None,
         opener: Callable[[], Any] | None = None,
+        record_hz: float = 0.0,
     ) -> None:
         super().__init__(description)
         if port is None and simulator is None:
@@ -94,7 +97,8 @@ class TaxelDriver(Driver, Tareable, ServesRawSignals):
         self._zero: np.ndarray | None = None  # counts at rest after a tare, subtracted from every frame
         self._tare_next = False
         rate = float(simulator.rate_hz) if simulator is not None else 0.0
-        self.raw_signals = (RawSignal("pressure", "grid", shape, unit="kPa", rate_hz=rate),)
+        self.raw_signals = (RawSignal("pressure", "grid", shape, unit="kPa", rate_hz=rate,
+                                      record_hz=record_hz),)
         self._pressure: tuple[int, np.ndarray] | None = None  # the last frame's (t_ns, kPa per taxel)
         self.set_health(Health.disconnected, "not started")
 

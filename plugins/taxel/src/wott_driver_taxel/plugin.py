@@ -56,6 +56,9 @@ class TaxelSettings(BackoffSettings):
     scene: Annotated[str, Meta(description=(
         "Scene TOML the simulator plays; default the bundled demo scene."))] | None = None
     rate_hz: Annotated[float, Meta(gt=0, le=2000, description="Simulator frame rate, frames/s.")] = 100.0
+    record_raw_hz: Annotated[float, Meta(ge=0, le=200, description=(
+        "Record the pressure grid in history this often, grids/s (pressureGridRecorded events, ~2 KB "
+        "each for 16 x 16: what learning exports read); 0: never, the default."))] = 0.0
 
 
 SCHEMA: dict[str, Any] = settings_schema(TaxelSettings)
@@ -148,5 +151,5 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
         desc = replace(desc, description=desc.description + " (simulated)")
     return TaxelDriver(
         desc, shape=(rows, cols), compliance=compliance, port=s.port, baudrate=s.baudrate,
-        protocol=s.protocol, simulator=simulator, backoff=reconnect,
+        protocol=s.protocol, simulator=simulator, backoff=reconnect, record_hz=s.record_raw_hz,
     )

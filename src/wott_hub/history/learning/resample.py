@@ -1,0 +1,128 @@
+"""Zero-order hold: every recorded stream of an episode onto one grid of frame times, never a future sample.
+
+Frame ``k`` of an episode that starts at ``start_ns`` is at ``t_k = start_ns + (k * 10**9) // fps`` (ns,
+floored). A stream's value at ``t_k`` is its last sample with ``t_ns <= t_k`` (of two at the same
+time, the later-numbered one), its age ``(t_k - t_ns) / 1e9`` seconds; before its first sample it has
+none (index -1, age -1). The sample held when an episode starts is looked up before it
+(``StorageReader.last_at``): a press that began before the episode is there in its first frame.
+
+Streams are read once per Thing (``ThingReader``: its records of the episode in seq order, handed to
+each stream by ``Stream.accepts``) a block of frames at a time, so memory holds a block and a page, not
+an episode. Within a Thing seq order is time order except for records published after later ones (a
+camera image, published once encoded, ~100 ms late): a block is held only once the Thing's pages have
+reached ``LATE_NS`` past its last frame, and each stream's samples are put in time order first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING, NamedTuple, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from wott_hub.events.record import Record
+
+    from ..storage import StorageReader
+
+__all__ = ["LATE_NS", "Held", "Stream", "ThingReader", "frame_times"]
+
+LATE_NS = 2_000_000_000
+"""How far past a block's last frame a Thing's records are read before the block is held."""
+_TIME_NS = 10**9
+
+
+def frame_times(start_ns: int, fps: int, k0: int, k1: int) -> np.ndarray:
+    """The times (ns, int64) of frames k0..k1-1 of an episode starting at ``start_ns``."""
+    k = np.arange(k0, k1, dtype=np.int64)
+    return start_ns + (k * _TIME_NS) // fps
+
+
+class Held(NamedTuple):
+    """A block of frames of one stream: ``samples`` in time order, and per frame ``which`` sample is held
+    (its index, -1: none yet) and its ``age_s`` (float32 seconds, -1 with none)."""
+
+    samples: list[Record]
+    which: np.ndarray
+    age_s: np.ndarray
+
+
+class Stream(Protocol):
+    """What a ``ThingReader`` hands records to: one recorded affordance (or one camera of it)."""
+
+    name: str
+    """The affordance its records have."""
+
+    def accepts(self, rec: Record) -> bool:
+        """Whether a record of ``name`` is this stream's (a camera picks its own images)."""
+        ...
+
+
+class _Samples:
+    """One stream's samples not yet past the frames held, and the one held last."""
+
+    def __init__(self, before: Record | None) -> None:
+        self.last = before
+        self.waiting: list[Record] = []
+
+    def hold(self, times: np.ndarray) -> Held:
+        w = self.waiting
+        if w and any(w[i].t_ns > w[i + 1].t_ns for i in range(len(w) - 1)):
+            w.sort(key=lambda r: r.t_ns)  # stable: equal times keep seq order
+        upto = int(times[-1])
+        n = next((i for i, r in enumerate(w) if r.t_ns > upto), len(w))
+        fresh, self.waiting = w[:n], w[n:]
+        samples = ([self.last] if self.last is not None else []) + fresh
+        if not samples:
+            return Held(samples, np.full(len(times), -1, np.int64), np.full(len(times), -1.0, np.float32))
+        t = np.fromiter((r.t_ns for r in samples), np.int64, len(samples))
+        index = np.searchsorted(t, times, side="right") - 1
+        age = np.where(index >= 0, (times - t[np.maximum(index, 0)]) / 1e9, -1.0).astype(np.float32)
+        self.last = samples[-1]
+        return Held(samples, index, age)
+
+
+class ThingReader:
+    """One Thing's records in [start_ns, end_ns], read once, held block by block for each stream."""
+
+    def __init__(
+        self,
+        reader: StorageReader,
+        thing: str,
+        streams: Sequence[Stream],
+        start_ns: int,
+        end_ns: int,
+        page: int = 20_000,
+    ) -> None:
+        self.streams = list(streams)
+        names = sorted({s.name for s in self.streams})
+        self._by_name: dict[str, list[tuple[Stream, _Samples]]] = {}
+        self._samples: dict[int, _Samples] = {}
+        for s in self.streams:
+            before = next((r for r in reader.last_at(thing, s.name, start_ns, limit=8) if s.accepts(r)), None)
+            samples = self._samples[id(s)] = _Samples(before)
+            self._by_name.setdefault(s.name, []).append((s, samples))
+        self._pages: Iterator[list[Record]] | None = (
+            reader.pages(thing, start_ns + 1, end_ns, names, page) if names and end_ns > start_ns else None
+        )
+        self._reached = start_ns
+        self.records = 0
+
+    def _read_until(self, t_ns: int) -> None:
+        while self._pages is not None and self._reached < t_ns:
+            page = next(self._pages, None)
+            if page is None:
+                self._pages = None
+                return
+            self.records += len(page)
+            by_name = self._by_name
+            for rec in page:
+                for stream, samples in by_name.get(rec.name, ()):
+                    if stream.accepts(rec):
+                        samples.waiting.append(rec)
+            self._reached = max(self._reached, page[-1].t_ns)
+
+    def hold(self, times: np.ndarray) -> list[Held]:
+        """Each stream's block at ``times`` (ascending), in the order of ``streams``."""
+        self._read_until(int(times[-1]) + LATE_NS)
+        return [self._samples[id(s)].hold(times) for s in self.streams]
