@@ -25,10 +25,14 @@ import numpy as np
 from wott_hub.plugin_api import Scene, SkinMesh
 
 from .compliance import Compliance
+from .matrix import encode_3dvitac, encode_flexitac
 from .protocol import SEQ_MODULO, encode_frame, encode_line
 from .pty_port import PtyPort
 
-__all__ = ["TaxelSimulator"]
+__all__ = ["REST_COUNTS", "TaxelSimulator"]
+
+REST_COUNTS = 20
+"""What an 8-bit matrix reads at rest (flexitac 0.3.1: "typical resting ADC values land around 10-40")."""
 
 
 class TaxelSimulator:
@@ -48,7 +52,7 @@ class TaxelSimulator:
         if rows * cols != mesh.n_nodes:
             raise ValueError(f"a {rows} x {cols} array needs a mesh of {rows * cols} nodes, "
                              f"got {mesh.n_nodes}")
-        if protocol not in ("binary", "ascii"):
+        if protocol not in ("binary", "ascii", "flexitac", "3dvitac"):
             raise ValueError(f"unknown protocol {protocol!r}")
         if not rate_hz > 0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
@@ -78,9 +82,13 @@ class TaxelSimulator:
         return self.compliance.counts(inward).reshape(self.shape), truth
 
     def encode(self, seq: int, counts: np.ndarray) -> bytes:
+        """One frame on the wire; an 8-bit matrix (no sequence number) reads its counts above its rest."""
         if self.protocol == "binary":
             return encode_frame(seq, counts)
-        return encode_line(seq, counts)
+        if self.protocol == "ascii":
+            return encode_line(seq, counts)
+        values = np.minimum(counts.astype(np.int64) + REST_COUNTS, 255)
+        return encode_flexitac(values) if self.protocol == "flexitac" else encode_3dvitac(values)
 
     def truth(self, seq: int) -> np.ndarray | None:
         """Ground truth of the recent frame sent with sequence number ``seq`` (None if forgotten)."""
