@@ -14,6 +14,7 @@ Raw signals (``ServesRawSignals``), as the property ``magneticField``: ``raw``, 
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import AsyncIterator, Callable
 from typing import Any
 
@@ -25,6 +26,7 @@ from wott_hub.plugin_api import (
     Backoff,
     DeviceDescription,
     Driver,
+    DriverError,
     Health,
     HealthStatus,
     RawSample,
@@ -36,6 +38,7 @@ from wott_hub.plugin_api import (
 
 from .boards import Board
 from .protocol import N_MAGS, AnySkinDecoder, Counters
+from .simulator import AnySkinSimulator
 
 __all__ = ["AnySkinDriver"]
 
@@ -43,12 +46,15 @@ __all__ = ["AnySkinDriver"]
 class AnySkinDriver(Driver, Tareable, ServesRawSignals):
     """Five magnetometers on ``port``; ``counters`` say what the link did (docs/skins.md)."""
 
-    def __init__(self, description: DeviceDescription, *, board: Board, port: str, baudrate: int = 115200,
-                 baseline_samples: int = 5, backoff: Backoff | None = None,
-                 opener: Callable[[], Any] | None = None) -> None:
+    def __init__(self, description: DeviceDescription, *, board: Board, port: str | None = None,
+                 simulator: AnySkinSimulator | None = None, baudrate: int = 115200, baseline_samples: int = 5,
+                 backoff: Backoff | None = None, opener: Callable[[], Any] | None = None) -> None:
         super().__init__(description)
+        if port is None and simulator is None:
+            raise DriverError(f"device {description.id!r}: a board needs a port or a simulator")
         self.board = board
         self.port = port
+        self.simulator = simulator
         self.baudrate = baudrate
         self.baseline_samples = baseline_samples
         self.counters = Counters()
@@ -67,8 +73,10 @@ class AnySkinDriver(Driver, Tareable, ServesRawSignals):
 
     async def frames(self) -> AsyncIterator[TactileFrame]:
         await self._retire_reader()
+        port = self.simulator.start() if self.simulator is not None else self.port
+        assert port is not None
         decoder = AnySkinDecoder(self.counters, joining=True)
-        self._reader = reader = SerialReader(self.port, decoder=decoder, baudrate=self.baudrate,
+        self._reader = reader = SerialReader(port, decoder=decoder, baudrate=self.baudrate,
                                              backoff=self._backoff, opener=self._opener,
                                              on_health=self.set_health)
         clock = self.clock
@@ -129,4 +137,6 @@ class AnySkinDriver(Driver, Tareable, ServesRawSignals):
 
     async def close(self) -> None:
         await self._retire_reader()
+        if self.simulator is not None:
+            await asyncio.to_thread(self.simulator.stop)
         self.set_health(Health.disconnected, "closed")

@@ -5,7 +5,7 @@ Imports stay light here (no pyserial, no driver) until a device is opened.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 from wott_hub.plugin_api import (
     MATERIALS,
@@ -24,11 +24,18 @@ __all__ = ["FAMILY", "AnySkinSettings"]
 FAMILY = "anyskin"
 
 
-class AnySkinSettings(BackoffSettings, kw_only=True):
+class AnySkinSettings(BackoffSettings):
     """An AnySkin or ReSkin board's settings (docs/skins.md)."""
 
+    # a real board needs its port; a simulated one makes its own
+    json_schema_extra: ClassVar[dict[str, Any]] = {
+        "if": {"not": {"required": ["simulate"], "properties": {"simulate": {"const": True}}}},
+        "then": {"required": ["port"]},
+    }
+
     port: Annotated[str, Meta(min_length=1, description=(
-        "Serial device of the QT Py or Trinket (/dev/ttyACM0, COM3) or pyserial URL (socket://host:port)."))]
+        "Serial device of the QT Py or Trinket (/dev/ttyACM0, COM3) or pyserial URL (socket://host:port)."
+    ))] | None = None
     title: Annotated[str, Meta(description="Human-readable name; default the device id.")] | None = None
     board: Annotated[Literal["anyskin", "reskin"], Meta(description=(
         "Which 5X board: its chips' order, addresses and axes (docs/skins.md)."))] = "anyskin"
@@ -42,6 +49,9 @@ class AnySkinSettings(BackoffSettings, kw_only=True):
         "The skin's elastomer (the TD's skinMaterial only: a magnetic skin gives no force here)."))] = \
         "dragonskin-10"
     thickness_mm: Annotated[float, Meta(gt=0, le=100, description="Skin thickness over the board, mm.")] = 2.0
+    simulate: Annotated[bool, Meta(description=(
+        "A simulated board on a pty instead of port (a toy field model, pressed now and then)."))] = False
+    rate_hz: Annotated[float, Meta(gt=0, le=2000, description="Simulated samples per second.")] = 200.0
 
 
 @hookimpl
@@ -71,9 +81,12 @@ def open_anyskin_device(config: DeviceConfig) -> Driver:
 
     from .boards import BOARDS, PITCH_MM
     from .driver import AnySkinDriver
+    from .simulator import AnySkinSimulator
 
     with naming_device(config):
         s = read_settings(AnySkinSettings, config.settings)
+        if s.port is None and not s.simulate:
+            raise SettingsError("setting 'port': required setting is missing")
         if s.material not in MATERIALS:
             raise SettingsError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
         reconnect = backoff(s)
@@ -89,5 +102,6 @@ def open_anyskin_device(config: DeviceConfig) -> Driver:
                      "field change in µT per magnetometer, board frame (x right, y away from the connector)"),
         node_signal=NodeSignal("magneticField"),
     )
-    return AnySkinDriver(desc, board=board, port=s.port, baudrate=s.baudrate,
+    simulator = AnySkinSimulator(board, rate_hz=s.rate_hz) if s.simulate else None
+    return AnySkinDriver(desc, board=board, port=s.port, simulator=simulator, baudrate=s.baudrate,
                          baseline_samples=s.baseline_samples, backoff=reconnect)
