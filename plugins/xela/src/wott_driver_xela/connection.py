@@ -63,6 +63,7 @@ class Connection:
         self._expected: int | None = None
         self._ws: WebSocketClientConnection | None = None
         self._task: asyncio.Task[None] | None = None
+        self._closing = False
 
     def subscribe(self, position: str, on_state: StateCallback) -> Subscription:
         sub = Subscription(position, on_state, self.queue_size)
@@ -77,10 +78,14 @@ class Connection:
             self.subscribers.remove(sub)
         if not self.subscribers and self._task is not None:
             task, self._task = self._task, None
-            task.cancel()
+            self._closing = True
             if self._ws is not None:
-                self._ws.close()
-            await asyncio.gather(task, return_exceptions=True)
+                self._ws.close()  # the closing handshake ends the read, and the socket with it
+            try:
+                await asyncio.wait_for(asyncio.shield(task), 2.0)
+            except TimeoutError:  # between attempts, or a server that never answers the close
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
 
     def _set_state(self, state: Health, reason: str) -> None:
         self.state = (state, reason)
@@ -89,7 +94,7 @@ class Connection:
 
     async def _run(self) -> None:
         connected_before = False
-        while True:
+        while not self._closing:
             try:
                 ws = await websocket_connect(self.url, connect_timeout=self.connect_timeout_s)
             except Exception as e:  # refused, unreachable, a timeout, not a WebSocket server: not now
@@ -107,6 +112,8 @@ class Connection:
             finally:
                 self._ws = None
                 ws.close()
+            if self._closing:
+                return
             self._set_state(Health.disconnected, reason)
             await asyncio.sleep(self.backoff.next_delay())
 
