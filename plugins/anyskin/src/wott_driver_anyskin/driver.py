@@ -40,7 +40,10 @@ from .boards import Board
 from .protocol import N_MAGS, AnySkinDecoder, Counters
 from .simulator import AnySkinSimulator
 
-__all__ = ["AnySkinDriver"]
+__all__ = ["QUEUE_SAMPLES", "AnySkinDriver"]
+
+QUEUE_SAMPLES = 1024
+"""Samples read but not yet processed, at most: 2 s at 500 samples/s (a busy hub catches up, none lost)."""
 
 
 class AnySkinDriver(Driver, Tareable, ServesRawSignals):
@@ -78,7 +81,7 @@ class AnySkinDriver(Driver, Tareable, ServesRawSignals):
         decoder = AnySkinDecoder(self.counters, joining=True)
         self._reader = reader = SerialReader(port, decoder=decoder, baudrate=self.baudrate,
                                              backoff=self._backoff, opener=self._opener,
-                                             on_health=self.set_health)
+                                             on_health=self.set_health, queue_size=QUEUE_SAMPLES)
         clock = self.clock
         clock.reset()
         try:

@@ -44,7 +44,10 @@ from .reader import SerialReader
 from .readings import CountReadings, PressureReadings, Readings
 from .simulator import TaxelSimulator
 
-__all__ = ["TaxelDriver"]
+__all__ = ["QUEUE_FRAMES", "TaxelDriver"]
+
+QUEUE_FRAMES = 256
+"""Frames read but not yet processed, at most: 2.5 s at 100 frames/s (a busy hub catches up, none lost)."""
 
 
 class TaxelDriver(Driver, Tareable, ServesRawSignals):
@@ -108,6 +111,7 @@ class TaxelDriver(Driver, Tareable, ServesRawSignals):
         self._reader = reader = SerialReader(
             port, shape=self.shape, baudrate=self.baudrate, protocol=self.protocol, counters=self.counters,
             backoff=self._backoff, opener=self._opener, on_health=self._on_link_health,
+            queue_size=QUEUE_FRAMES,
         )
         readings = self.readings
         clock = self.clock

@@ -86,9 +86,13 @@ class SimulatedLine:
             self._thread.start()
         return path
 
-    def stop(self) -> None:
+    def halt(self) -> None:
+        """Stop sending; the line stays open (what was sent can still be read)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5.0)
+
+    def stop(self) -> None:
+        self.halt()
         with self.lock:
             self.port.close()

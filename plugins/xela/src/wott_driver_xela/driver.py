@@ -98,6 +98,11 @@ class XelaDriver(Driver, Tareable, ServesRawSignals):
         self._sub = None
         await release(conn, sub)
 
+    @property
+    def dropped(self) -> int:
+        """Readings the hub fell too far behind to keep (the current stream's)."""
+        return self._sub.dropped if self._sub is not None else 0
+
     def _usable(self, item: Reading | Problem) -> np.ndarray | None:
         """The reading's vectors for this device, or None with the reason in health."""
         if isinstance(item, Problem):

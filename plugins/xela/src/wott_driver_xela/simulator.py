@@ -2,12 +2,13 @@
 
 ``ReplayServer`` serves whatever messages it is given: each client gets the Welcome when it connects,
 then every client message ``k`` at ``rate_hz`` (the server's running number counts on whether anyone
-listens or not). It runs in a thread of its own, as a separate program would, and can be stopped and
-started again on the same port (a server restart). ``XelaSimulator`` makes the messages: the shape of
-``protocol``'s sources (``message``, ``time``, one key per position with ``sensor``, ``model``,
-``time``, ``taxels``, ``data`` as comma-separated 4-digit hex, ``calibrated`` when asked), counts
-resting near 30,000 with a little noise, and a press (``press``) that raises a taxel's z and its
-neighbours'. A toy for tests, the benchmark and trying the hub without a sensor.
+listens or not; with ``hold``, from ``release`` on). It runs in a thread of its own, as a separate
+program would, and can be stopped and started again on the same port (a server restart).
+``XelaSimulator`` makes the messages: the shape of ``protocol``'s sources (``message``, ``time``, one
+key per position with ``sensor``, ``model``, ``time``, ``taxels``, ``data`` as comma-separated 4-digit
+hex, ``calibrated`` when asked), counts resting near 30,000 with a little noise, and a press
+(``press``) that raises a taxel's z and its neighbours'. A toy for tests, the benchmark and trying the
+hub without a sensor.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ class _Client(tornado.websocket.WebSocketHandler):
 
 class ReplayServer:
     def __init__(self, message: Callable[[int], str], *, rate_hz: float = 100.0, welcome: str = WELCOME,
-                 port: int = 0) -> None:
+                 port: int = 0, hold: bool = False) -> None:
         self.message = message
         self.rate_hz = rate_hz
         self.welcome = welcome
@@ -62,6 +63,9 @@ class ReplayServer:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
+        self._released = threading.Event()
+        if not hold:
+            self._released.set()
         self._stopping: asyncio.Event | None = None
 
     @property
@@ -77,6 +81,10 @@ class ReplayServer:
         if not self._ready.wait(10):
             raise RuntimeError("the simulated xela_server did not start")
         return self.url
+
+    def release(self) -> None:
+        """Start sending (a server made with ``hold``)."""
+        self._released.set()
 
     def stop(self) -> None:
         """Close every connection and stop listening (the server went away)."""
@@ -97,8 +105,10 @@ class ReplayServer:
         http.add_sockets(sockets)
         self._ready.set()
         period = 1.0 / self.rate_hz
-        due = self._loop.time()
         try:
+            while not (self._released.is_set() or self._stopping.is_set()):
+                await asyncio.sleep(0.01)
+            due = self._loop.time()
             while not self._stopping.is_set():
                 text = self.message(self.sent)
                 self.sent += 1
