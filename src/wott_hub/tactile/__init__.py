@@ -20,7 +20,7 @@ from .processing import FrameProcessor, FrameResult, ProcessingParams
 __all__ = [
     "ACTIONS", "ActionDetector", "ActionParams", "Contact", "CoordinateFrame", "DeviceDescription",
     "FrameError", "FrameProcessor", "FrameResult", "MATERIALS", "Material", "MaterialError",
-    "MeshError", "NodeSignal", "ProcessingParams", "SkinMesh", "SkinShape", "TactileFrame", "WinklerForceModel",
-    "barrel", "cylinder", "find_contacts", "flat_pad", "load_taclink_barrel",
+    "MeshError", "NodeSignal", "ProcessingParams", "SkinMesh", "SkinShape", "TactileFrame",
+    "WinklerForceModel", "barrel", "cylinder", "find_contacts", "flat_pad", "load_taclink_barrel",
     "shore_to_modulus_mpa", "taclink_barrel",
 ]
