@@ -42,17 +42,8 @@ def makers_reader(board: str, path: str):
     return sensor, lambda: sensor.get_sample()[2]
 
 
-async def until(condition, what: str, timeout_s: float = 20.0) -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout_s
-    while not condition():
-        if loop.time() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        await asyncio.sleep(0.01)
-
-
 @pytest.mark.parametrize("board", ["anyskin", "reskin"])
-def test_the_makers_reader_and_the_hub_agree_sample_for_sample(board, tmp_path):
+def test_the_makers_reader_and_the_hub_agree_sample_for_sample(board, tmp_path, until):
     rng = np.random.default_rng(45)
     sent = [board_values(k, rng) for k in range(N)]
     data = b"".join(struct.pack("<20f", *v.ravel()) + b"\r\n" for v in sent)

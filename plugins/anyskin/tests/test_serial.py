@@ -21,19 +21,11 @@ def frames(start: int, n: int) -> list[bytes]:
     return [encode_sample(np.full(5, 25.0), rng.normal(0, 300, (5, 3))) for _ in range(n)]
 
 
-async def until(condition, what: str, timeout_s: float = 20.0) -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout_s
-    while not condition():
-        if loop.time() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        await asyncio.sleep(0.01)
-
-
 class Run:
     """The driver on ``path``, its frames collected by a task."""
 
-    def __init__(self, path: str, **settings) -> None:
+    def __init__(self, path: str, until, **settings) -> None:
+        self.until = until
         self.driver = REGISTRY.open_device(DeviceConfig("skin", "anyskin", {
             "port": path, "backoff_initial_s": 0.02, "backoff_cap_s": 0.1, **settings}))
         self.frames: list = []
@@ -52,7 +44,7 @@ class Run:
                 await asyncio.sleep(0.005)
 
         self.tasks = [asyncio.create_task(consume()), asyncio.create_task(watch())]
-        await until(lambda: "waiting for frames" in self.driver.health().reason, "the port to open")
+        await self.until(lambda: "waiting for frames" in self.driver.health().reason, "the port to open")
         return self
 
     async def __aexit__(self, *exc) -> None:
@@ -62,7 +54,7 @@ class Run:
         await asyncio.gather(*self.tasks, return_exceptions=True)
 
 
-def test_garbage_and_odd_writes_mid_stream_lose_at_most_the_frame_they_hit(tmp_path):
+def test_garbage_and_odd_writes_mid_stream_lose_at_most_the_frame_they_hit(tmp_path, until):
     port = PtyPort(tmp_path / "ttyACM0")
     path = port.open()
     good = frames(1, 60)
@@ -72,7 +64,7 @@ def test_garbage_and_odd_writes_mid_stream_lose_at_most_the_frame_they_hit(tmp_p
     data = data[:cut] + junk + data[cut:]
 
     async def main():
-        async with Run(path, baseline_samples=1) as run:
+        async with Run(path, until, baseline_samples=1) as run:
             for i in range(0, len(data), 113):  # writes of any size, across frame boundaries
                 await asyncio.to_thread(port.write_all, data[i : i + 113])
             c = run.driver.counters
@@ -87,12 +79,12 @@ def test_garbage_and_odd_writes_mid_stream_lose_at_most_the_frame_they_hit(tmp_p
     port.close()
 
 
-def test_an_unplugged_board_is_disconnected_and_comes_back(tmp_path):
+def test_an_unplugged_board_is_disconnected_and_comes_back(tmp_path, until):
     port = PtyPort(tmp_path / "ttyACM0")
     path = port.open()
 
     async def main():
-        async with Run(path, baseline_samples=2) as run:
+        async with Run(path, until, baseline_samples=2) as run:
             await asyncio.to_thread(port.write_all, b"".join(frames(3, 10)))
             await until(lambda: len(run.frames) == 9, "the first frames")
             port.unplug()  # the pty goes: the reader's next read fails (EIO), the path vanishes
@@ -110,14 +102,14 @@ def test_an_unplugged_board_is_disconnected_and_comes_back(tmp_path):
     port.close()
 
 
-def test_repeats_are_skipped_and_said_in_health(tmp_path):
+def test_repeats_are_skipped_and_said_in_health(tmp_path, until):
     port = PtyPort(tmp_path / "ttyACM0")
     path = port.open()
     good = frames(5, 8)
     data = b"".join(f for f in good for _ in range(2))  # every sample sent twice, as a fast loop does
 
     async def main():
-        async with Run(path, baseline_samples=1) as run:
+        async with Run(path, until, baseline_samples=1) as run:
             await asyncio.to_thread(port.write_all, data)
             await until(lambda: len(run.frames) == 8, "the samples")
             assert run.driver.counters.duplicates == 8

@@ -26,16 +26,7 @@ def frame(k: int, rng: np.random.Generator) -> np.ndarray:
     return v
 
 
-async def until(condition, what: str, timeout_s: float = 20.0) -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout_s
-    while not condition():
-        if loop.time() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        await asyncio.sleep(0.01)
-
-
-def test_flexitac_and_the_hub_read_the_same_frames(tmp_path):
+def test_flexitac_and_the_hub_read_the_same_frames(tmp_path, until):
     rng = np.random.default_rng(12)
     sent = [frame(k, rng) for k in range(BASELINE + MORE)]
     data = b"".join(b"\xaa\x55" + v.astype(np.uint8).tobytes() for v in sent) + b"\xaa\x55"

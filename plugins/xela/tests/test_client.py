@@ -47,15 +47,6 @@ class Messages:
                            "complete": t + 1e-5})
 
 
-async def until(condition, what: str, timeout_s: float = 20.0) -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout_s
-    while not condition():
-        if loop.time() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        await asyncio.sleep(0.01)
-
-
 class Reading:
     """A position's driver read by a task: each frame with the raw counts (and forces) it came from."""
 
@@ -86,7 +77,7 @@ def server():
     s.stop()
 
 
-def test_every_reading_of_each_position_once_and_exactly_over_one_connection(server):
+def test_every_reading_of_each_position_once_and_exactly_over_one_connection(server, until):
     async def main():
         one = Reading(server.url, 1, "uSPa46")
         two = Reading(server.url, 2, "uSPa44")
@@ -108,7 +99,7 @@ def test_every_reading_of_each_position_once_and_exactly_over_one_connection(ser
     asyncio.run(main())
 
 
-def test_calibrated_forces_as_the_node_vectors(server):
+def test_calibrated_forces_as_the_node_vectors(server, until):
     async def main():
         one = Reading(server.url, 1, "uSPa46", forces=True)
         await until(lambda: len(one.got) >= 20, "readings")
@@ -125,7 +116,7 @@ def test_calibrated_forces_as_the_node_vectors(server):
     asyncio.run(main())
 
 
-def test_a_server_that_goes_and_comes_back(server):
+def test_a_server_that_goes_and_comes_back(server, until):
     async def main():
         one = Reading(server.url, 1, "uSPa46")
         await until(lambda: len(one.got) >= 10, "readings")
@@ -147,7 +138,7 @@ def test_a_server_that_goes_and_comes_back(server):
     ({"model": "uSPa44", "data": [30_000] * 47}, "position 2: 'data' holds 47 values, uSPa44 has 16 taxels"),
     ({"model": "uSPa46", "data": [30_000] * 72}, "the server reports uSPa46 at position 2, this device is"),
 ])
-def test_a_bad_entry_is_a_reason_in_health_and_the_stream_goes_on(bad, reason):
+def test_a_bad_entry_is_a_reason_in_health_and_the_stream_goes_on(bad, reason, until):
     messages = Messages()
     server = ReplayServer(messages, rate_hz=100.0)
     server.start()
@@ -170,7 +161,7 @@ def test_a_bad_entry_is_a_reason_in_health_and_the_stream_goes_on(bad, reason):
     server.stop()
 
 
-def test_a_position_the_server_does_not_send(server):
+def test_a_position_the_server_does_not_send(server, until):
     async def main():
         five = Reading(server.url, 5, "uSPa44")
         await until(lambda: "position 5 is not in the server's messages (it sends 1, 2)"

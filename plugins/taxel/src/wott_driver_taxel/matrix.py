@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .protocol import Counters, DecoderBase, RawFrame
+from .protocol import Counters, DecoderBase, LineDecoder, RawFrame
 
 __all__ = ["MARKER", "FlexiTacDecoder", "VitacDecoder", "encode_3dvitac", "encode_flexitac"]
 
@@ -104,10 +104,9 @@ class FlexiTacDecoder(DecoderBase):
         self._joining = True
 
 
-class VitacDecoder(DecoderBase):
-    """3D-ViTac frames: ``rows`` lines of ``cols`` decimal values, then a blank line."""
-
-    expect: tuple[int, int]
+class VitacDecoder(LineDecoder):
+    """3D-ViTac frames: ``rows`` lines of ``cols`` decimal values, then a blank line (the line splitting,
+    a line too long and joining are ``LineDecoder``'s)."""
 
     def __init__(self, expect: tuple[int, int], counters: Counters | None = None,
                  joining: bool = False) -> None:
@@ -116,30 +115,11 @@ class VitacDecoder(DecoderBase):
         self._rows: list[list[int]] = []
         self._row_bytes = 0
         self._bad = False  # a line of this frame was no row
-        self._first_line = joining  # the tail of a line sent before we listened
-        self._skipping = False
 
-    def feed(self, data: bytes | bytearray) -> list[RawFrame]:
-        buf = self._buf
-        buf += data
-        out: list[RawFrame] = []
-        pos = 0
-        while True:
-            nl = buf.find(b"\n", pos)
-            if nl < 0:
-                if len(buf) - pos > self.max_line:  # no line end for too long: noise
-                    self._garbage(len(buf) - pos)
-                    self._bad, self._skipping, pos = True, True, len(buf)
-                break
-            line = bytes(buf[pos:nl])
-            pos = nl + 1
-            if self._first_line or self._skipping:
-                self._first_line = self._skipping = False
-                self._garbage(len(line) + 1)
-                continue
-            self._line(line, out)
-        del buf[:pos]
-        return out
+    def _discard(self, line: bytes) -> None:
+        super()._discard(line)
+        if line.strip():  # a row's piece: the frame it was part of is incomplete (a blank line is none)
+            self._bad = True
 
     def _line(self, line: bytes, out: list[RawFrame]) -> None:
         text = line.strip()
@@ -176,12 +156,10 @@ class VitacDecoder(DecoderBase):
 
     def reset(self) -> None:
         """The link was lost: a frame in progress is truncated; resync on the next blank line."""
-        if self._rows or self._buf.strip():
+        if self._rows and not self._buf.strip():
             self.counters.truncated += 1
-        self._buf.clear()
+        super().reset()
         self._rows, self._bad, self._row_bytes = [], False, 0
-        self._in_garbage = self._skipping = False
-        self._joining = self._first_line = True
 
 
 def _bytes(values: np.ndarray) -> np.ndarray:

@@ -279,11 +279,15 @@ class LineDecoder(DecoderBase):
             pos = nl + 1
             if self._skipping or self._first_line:
                 self._skipping = self._first_line = False
-                self._garbage(len(line) + 1)
+                self._discard(line)
                 continue
             self._line(line, out)
         del buf[:pos]
         return out
+
+    def _discard(self, line: bytes) -> None:
+        """A line dropped unread: the rest of one too long, or the first after joining."""
+        self._garbage(len(line) + 1)
 
     def _line(self, line: bytes, out: list[RawFrame]) -> None:
         text = line.rstrip(b"\r")
