@@ -40,7 +40,7 @@ class PressureReadings:
         self.compliance = compliance
         self.shape = shape
         self._inward = inward
-        self._zero: np.ndarray | None = None  # counts at rest after a tare, subtracted from every frame
+        self.zero: np.ndarray | None = None  # counts at rest after a tare, subtracted from every frame
         self._tare_next = False
         self._pressure: tuple[int, np.ndarray] | None = None  # the last frame's (t_ns, kPa per taxel)
         self.raw_signals: tuple[RawSignal, ...] = (RawSignal("pressure", "grid", shape, unit="kPa",
@@ -49,9 +49,9 @@ class PressureReadings:
     def frame(self, t_ns: int, counts: np.ndarray) -> TactileFrame:
         values = counts.astype(np.float64)
         if self._tare_next:  # this frame's readings are the new zero
-            self._zero, self._tare_next = values.copy(), False
-        if self._zero is not None:
-            values = np.maximum(values - self._zero, 0.0)
+            self.zero, self._tare_next = values.copy(), False
+        if self.zero is not None:
+            values = np.maximum(values - self.zero, 0.0)
         c = self.compliance
         pressure = c.pressure_kpa(values)  # float64: the frame keeps this very array
         self._pressure = (t_ns, pressure)
