@@ -1,4 +1,5 @@
-"""Root conftest: fixtures every test folder shares, whichever distribution it belongs to.
+"""Root conftest: fixtures every test folder shares, whichever distribution it belongs to
+(``until``: poll a condition inside a test's event loop).
 
 ``tests/postgres.py`` (the throw-away PostgreSQL cluster: ``pg_cluster``, ``pg_url``) is
 registered here as a plugin, so ``tests/`` and ``directory/tests/`` (its own distribution)
@@ -20,6 +21,8 @@ from __future__ import annotations
 import importlib.util
 import sys
 from pathlib import Path
+
+import pytest
 
 _NAME = "wott_tests_postgres"
 
@@ -60,3 +63,22 @@ def pytest_xdist_make_scheduler(config, log):
             return "mdns" if path in MDNS_FILES else path
 
     return FilesAndMdns(config, log)
+
+
+async def _until(condition, what: str, timeout_s: float = 20.0) -> None:
+    """Poll ``condition`` on the running event loop every 10 ms until it holds (AssertionError naming
+    ``what`` after ``timeout_s``)."""
+    import asyncio
+
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout_s
+    while not condition():
+        if loop.time() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        await asyncio.sleep(0.01)
+
+
+@pytest.fixture(scope="session")
+def until():
+    """``await until(condition, what, timeout_s=20)``: the async ``eventually`` of every test folder."""
+    return _until

@@ -312,12 +312,13 @@ def test_every_number_setting_of_every_first_party_family_declares_its_bounds():
 
 
 def test_the_taxel_model_is_read_directly_too():
-    from wott_driver_taxel.plugin import TaxelSettings, open_taxel_device
+    from wott_driver_taxel.plugin import PRESETS, TaxelSettings, open_taxel_device
 
     from wott_hub.plugin_api import DeviceConfig, DriverError, read_settings
 
     s = read_settings(TaxelSettings, {"port": "/dev/ttyUSB0"})
-    assert (s.rows, s.kpa_per_count, s.backoff_cap_s) == (16, 0.01, 5.0)
+    assert (s.rows, s.kpa_per_count, s.backoff_cap_s) == (None, 0.01, 5.0)  # rows: the protocol's
+    assert (PRESETS[s.protocol].rows, PRESETS["flexitac"].cols) == (16, 32)
     with pytest.raises(DriverError, match=r"setting 'kpa_per_count': a number, got 1e\+300; "
                                           r"must be above 0 and at most 10$"):
         open_taxel_device(DeviceConfig("t", "taxel-array", {"simulate": True, "kpa_per_count": 1e300}))

@@ -3,7 +3,7 @@
 ``python -m wott_hub.config_docs > docs/configuration.md`` writes it;
 tests/test_config_bounds.py fails when the committed page differs from what this module
 renders from ``wott_hub.config.config_schema()`` and from the settings models of the
-first-party device families (``FIRST_PARTY``: the built-in ones and the three plugins of
+first-party device families (``FIRST_PARTY``: the built-in ones and the five plugins of
 ``plugins/``). Each family gets the table of its settings (``settings_rows``: nested tables
 flattened to ``optics.focal_px``, what ``wott-hub plugins families NAME`` prints too), the
 rules across settings its schema states, and a complete ``[[device]]`` example
@@ -23,7 +23,7 @@ from wott_hub.config import config_schema
 
 __all__ = ["DEVICE_EXAMPLES", "FIRST_PARTY", "SettingRow", "family_rules", "render", "settings_rows"]
 
-FIRST_PARTY = ("builtin", "barrel", "flatpad", "taxel")
+FIRST_PARTY = ("builtin", "barrel", "flatpad", "taxel", "anyskin", "xela")
 """The plugins whose families the page documents: the hub's own and those of ``plugins/``."""
 
 DEVICE_EXAMPLES: dict[str, str] = {
@@ -90,7 +90,7 @@ id = "left-palm"
 family = "taxel-array"            # rows x cols pressure cells on a serial port (docs/taxel-protocol.md)
 port = "/dev/ttyUSB0"             # or COM3, socket://10.0.0.7:4000; simulate = true: no board needed
 baudrate = 921600
-protocol = "binary"               # or "ascii"
+protocol = "binary"               # or "ascii"; "flexitac", "3dvitac": their makers' formats (docs/skins.md)
 rows = 16
 cols = 16
 pitch_mm = 4.0
@@ -98,6 +98,24 @@ material = "ecoflex-00-30"
 thickness_mm = 3.0
 kpa_per_count = 0.01
 epsilon_mm = 0.05
+''',
+    "anyskin": '''\
+[[device]]
+id = "fingertip"
+family = "anyskin"                # AnySkin or ReSkin magnetic skin (docs/skins.md)
+port = "/dev/ttyACM0"             # the QT Py / Trinket; simulate = true: no board needed
+board = "anyskin"                 # or "reskin"
+epsilon_ut = 30.0
+baseline_samples = 5
+''',
+    "xela": '''\
+[[device]]
+id = "xela-index"
+family = "xela"                   # one position of a running xela_server (docs/skins.md)
+url = "ws://127.0.0.1:5000"
+position = 1
+model = "uSPa46"
+forces = false                    # true: the server's calibrated forces, N
 ''',
 }
 """A complete ``[[device]]`` table per first-party family, as docs/configuration.md shows it."""

@@ -65,8 +65,11 @@ def check(obj: Any, model: type[Any], where: str) -> None:
 
 def suggest(word: str, choices: Iterable[str], form: str = "{!r}") -> str:
     """``"; did you mean 'simulate'?"`` when one of ``choices`` is close to ``word`` (shown by
-    ``form``: ``"[{}]"`` for a table), else ``""``."""
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    ``form``: ``"[{}]"`` for a table), else ``""``. The one choice ``word`` begins, if any, before the
+    closest spelling: "taxel" is the start of "taxel-array" more than a misspelt "xela"."""
+    choices = list(choices)
+    begun = [c for c in choices if word and c.startswith(word)]
+    close = begun if len(begun) == 1 else difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
     return f"; did you mean {form.format(close[0])}?" if close else ""
 
 

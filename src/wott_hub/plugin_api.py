@@ -27,7 +27,8 @@ What is here, by the job it does in a plugin:
   hands a read table to a plain class;
   ``BackoffSettings`` the two reconnect settings, ``backoff`` reads them);
 - the tactile domain, no I/O: ``SkinMesh`` and its builders, ``DeviceDescription``
-  with ``SkinShape``, ``CoordinateFrame`` and ``Material``, ``TactileFrame``;
+  with ``SkinShape``, ``CoordinateFrame``, ``Material`` and ``NodeSignal`` (what the node
+  vectors measure), ``TactileFrame``;
   ``Indenter`` / ``indent`` (contact mechanics for simulators); ``Scene``
   (scripted scenes a simulator plays).
 
@@ -75,6 +76,7 @@ from wott_hub.tactile import (
     FrameError,
     Material,
     MeshError,
+    NodeSignal,
     SkinMesh,
     SkinShape,
     TactileFrame,
@@ -103,6 +105,7 @@ __all__ = [
     "Material",
     "MeshError",
     "Meta",
+    "NodeSignal",
     "NoisyAtRest",
     "RawSample",
     "RawSignal",

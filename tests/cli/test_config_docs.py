@@ -31,7 +31,8 @@ def test_every_first_party_family_has_a_settings_table_and_an_example():
     from wott_hub.plugins import get_registry
 
     families = {f.name for f in get_registry().families().values() if f.plugin in FIRST_PARTY}
-    assert families == {"scene", "wot-remote", "barrel-vision", "flat-vision", "taxel-array"}
+    assert families == {"scene", "wot-remote", "barrel-vision", "flat-vision", "taxel-array", "anyskin",
+                        "xela"}
     assert set(_examples()) == families
     text = PAGE.read_text()
     for key in ("`kpa_per_count`", "`optics.focal_px`", "`cameras.f_px`", "`idle_timeout_s`", "`rate_hz`"):

@@ -202,5 +202,6 @@ def test_taxel_tare_zeroes_the_offsets_at_the_current_readings(run):
 
     driver, (pressed, tared, *later) = run(main(), timeout=30)
     assert pressed > 0 and tared == 0.0  # the frame read at the tare is the new zero
-    assert driver._zero is not None and driver._zero.max() > 0  # ... the press's counts, subtracted
+    zero = driver.readings.zero
+    assert zero is not None and zero.max() > 0  # ... the press's counts, subtracted
     assert len(later) == 2 and all(p >= 0 for p in later)

@@ -70,6 +70,8 @@ def contacts(text: str) -> Contacts:
         loc, force = _xyz(d["contactLocations"]), _xyz(d["contactForces"])
     except (KeyError, TypeError, ValueError) as e:
         raise InvalidInput(f"not a contactInformation value ({e!r})") from None
+    if len(force) == 0:  # a device whose signal gives no force (docs/skins.md): arrows of length 0
+        force = np.zeros_like(loc)
     if len(loc) != len(force):
         raise InvalidInput(f"contactInformation: {len(loc)} locations but {len(force)} forces")
     return Contacts(loc, force)

@@ -71,10 +71,11 @@ def _xyz(values: list[float]) -> str:
 
 def contacts_json(res: FrameResult) -> str:
     """``encode(res.contact_information())``: rounded to 0.1 µm / 0.1 mN as that method rounds;
-    ``contactIds`` while touched (issue 31)."""
+    ``contactIds`` while touched (issue 31); ``contactForces`` empty for a device whose node vectors give
+    no force (``FrameResult.forces``)."""
     contacts = res.contacts
     where = ",".join([_xyz(c.location.tolist()) for c in contacts])
-    force = ",".join([_xyz(c.force.tolist()) for c in contacts])
+    force = ",".join([_xyz(c.force.tolist()) for c in contacts]) if res.forces else ""
     if "n" in where or "n" in force:  # "nan"/"inf": the only letters besides x, y, z there
         raise ValueError("Out of range float values are not JSON compliant")  # as encode() says
     ids = f',"contactIds":[{",".join([str(c.id) for c in contacts])}]' if contacts else ""

@@ -358,6 +358,7 @@ class DevicePipeline:
         clock = time.monotonic
         records, unavailable_changed = self.records, self._unavailable_changed
         frame_done = sink.frame_done if isinstance(sink, FrameSink) else None
+        displaced = driver.description.node_signal.is_displacement  # else no skinDisplacement: not in mm
         while True:
             try:
                 self.started()
@@ -376,7 +377,7 @@ class DevicePipeline:
                         self.reason = str(e)
                         continue
                     self.frames += 1
-                    records(res, t_in, sink, frame.displacement)
+                    records(res, t_in, sink, frame.displacement if displaced else None)
                     unavailable_changed(res.t_ns, sink)
                     if frame_done is not None:
                         frame_done()

@@ -9,8 +9,9 @@ JPEG are encoded in a thread (Pillow releases the GIL; a 640 x 480 PNG takes mil
 the event loop must not), .npy and JSON on the loop.
 
 Formats (``FORMATS``): ``json`` (an image: a JSON string, base64 of its PNG; a grid: an object
-``{timeStamp, rows, cols, pressure}``), ``png``, ``jpeg``, ``npy`` (NumPy's .npy: an image H x W x C
-uint8, a grid rows x cols float32). An image of the wrong dtype or shape from a driver is a
+``{timeStamp, rows, cols, pressure}``; vectors: ``{timeStamp, signal, numOfNodes, vectors}``), ``png``,
+``jpeg``, ``npy`` (NumPy's .npy: an image H x W x C uint8, a grid rows x cols float32, vectors N x 3
+float32). An image of the wrong dtype or shape from a driver is a
 ``DriverError`` naming the device: the reader gets a 502, the device and the hub carry on.
 
 ``RawRecorder``: a device that opted in (``RawSignal.record_hz``) has its images published as
@@ -32,7 +33,7 @@ import numpy as np
 
 from wott_hub.errors import DriverError
 from wott_hub.events.record import KIND_EVENT, Record
-from wott_hub.tactile.raw import IMAGE, RawSample, RawSignal
+from wott_hub.tactile.raw import GRID, IMAGE, VECTORS, RawSample, RawSignal
 from wott_hub.td.raw import PRESSURE_GRID_RECORDED, RAW_IMAGE_RECORDED
 
 if TYPE_CHECKING:
@@ -108,12 +109,18 @@ def encode_sample(signal: RawSignal, sample: RawSample, fmt: str, device: str = 
             return _npy(image)
         return json.dumps(base64.b64encode(_png(image)).decode("ascii")).encode()
     grid = np.asarray(sample.array, np.float64)
-    if grid.ndim != 2 or not np.isfinite(grid).all():
-        raise DriverError(f"device {device!r}: grid {signal.name!r} is not a finite rows x cols array")
+    vectors = signal.kind == VECTORS
+    if grid.ndim != 2 or (vectors and grid.shape[1] != 3) or not np.isfinite(grid).all():
+        raise DriverError(f"device {device!r}: {signal.kind} {signal.name!r} is not a finite "
+                          f"{'N x 3' if vectors else 'rows x cols'} array")
     if fmt == "npy":
         return _npy(grid.astype(np.float32))
     if fmt != "json":
-        raise ValueError(f"a grid has no {fmt} form")
+        raise ValueError(f"a {signal.kind} signal has no {fmt} form")
+    if vectors:
+        xyz = [{"x": x, "y": y, "z": z} for x, y, z in np.round(grid, 4).tolist()]
+        return json.dumps({"timeStamp": sample.t_ns, "signal": signal.name, "numOfNodes": len(xyz),
+                           "vectors": xyz}, separators=(",", ":")).encode()
     rows, cols = grid.shape
     values = np.round(grid, 3).tolist()
     return json.dumps({"timeStamp": sample.t_ns, "rows": rows, "cols": cols, "pressure": values},
@@ -182,7 +189,7 @@ class RawRecorder:
 
     @property
     def signals(self) -> list[RawSignal]:
-        return [s for s in self.source.signals if s.record_hz > 0]
+        return [s for s in self.source.signals if s.kind in (IMAGE, GRID) and s.record_hz > 0]
 
     async def run(self) -> None:
         await asyncio.gather(*(self._signal(s) for s in self.signals))
@@ -203,7 +210,7 @@ class RawRecorder:
             if enc is None or enc.t_ns == last:  # no frame yet, or none since the last recorded
                 continue
             last = enc.t_ns
-            if signal.kind != IMAGE:  # a grid: its JSON form as it is
+            if signal.kind == GRID:  # its JSON form as it is
                 if self.sink.wants(self.thing, KIND_EVENT, PRESSURE_GRID_RECORDED):
                     self.sink.put(Record(self.thing, 0, KIND_EVENT, PRESSURE_GRID_RECORDED, enc.t_ns,
                                          enc.body.decode()))

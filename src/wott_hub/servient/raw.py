@@ -1,15 +1,16 @@
 """HTTP routes of a device's raw signals: one read (JSON, PNG, JPEG, .npy) and a stream at a reader's rate.
 
 ``GET /wot/<id>/properties/rawImage[?format=png|jpeg|npy][&camera=<name>]``: the camera's latest
-image; ``pressureGrid[?format=npy]``: the taxel grid. ``.../stream?camera=&maxRate=``: a camera's
-images as ``multipart/x-mixed-replace`` JPEG parts (what a browser ``<img>`` shows live), a grid as
-an SSE stream of JSON messages; at most ``maxRate`` a second and never a frame twice, each
+image; ``pressureGrid[?format=npy][&signal=<name>]``: a taxel grid; ``magneticField``, ``taxelSignal``,
+``taxelForce`` (same parameters): a node's vectors. ``.../stream?camera=&signal=&maxRate=``: a camera's
+images as ``multipart/x-mixed-replace`` JPEG parts (what a browser ``<img>`` shows live), a grid or
+vectors as an SSE stream of JSON messages; at most ``maxRate`` a second and never a frame twice, each
 encoded once whatever the number of readers (``runtime.raw.RawSource``). The TD declares them
 (``td.raw``, ``td.forms``).
 
 Bad input is refused before anything is read, with a 400 problem+json naming the parameter: a
-``format`` the signal has not, a ``camera`` the device has not, a ``maxRate`` that is not a number
-in (0, ``MAX_RATE_HZ``]. A device that fails to give a sample answers 502 (it is marked, never
+``format`` the signal has not, a ``camera`` or ``signal`` the device has not, a ``maxRate`` that is not a
+number in (0, ``MAX_RATE_HZ``]. A device that fails to give a sample answers 502 (it is marked, never
 the hub), one with no frame yet 503 with ``Retry-After``.
 """
 
@@ -26,8 +27,8 @@ from tornado.httputil import HTTPServerRequest
 from tornado.iostream import StreamClosedError
 
 from wott_hub.errors import WottHubError
-from wott_hub.tactile.raw import GRID, IMAGE, RawSignal
-from wott_hub.td.raw import DEFAULT_RATE_HZ, MAX_RATE_HZ, RAW_IMAGE
+from wott_hub.tactile.raw import GRID, IMAGE, VECTORS, RawSignal
+from wott_hub.td.raw import DEFAULT_RATE_HZ, MAX_RATE_HZ, raw_property
 from wott_hub.types import Encoded, RawReads
 
 from .context import ServingContext
@@ -37,7 +38,7 @@ from .things import ServedThing
 __all__ = ["BOUNDARY", "RawPropertyHandler", "RawStreamHandler"]
 
 BOUNDARY = "frame"
-_FORMATS = {IMAGE: ("json", "png", "jpeg", "npy"), GRID: ("json", "npy")}
+_FORMATS = {IMAGE: ("json", "png", "jpeg", "npy"), GRID: ("json", "npy"), VECTORS: ("json", "npy")}
 
 
 class _RawBase(BaseHandler):
@@ -53,19 +54,18 @@ class _RawBase(BaseHandler):
         return thing, thing.raw
 
     def signal(self, raw: RawReads, name: str) -> RawSignal:
-        """The signal the request names: a camera (``camera``, default the first) or the grid."""
-        kind = IMAGE if name == RAW_IMAGE else GRID
-        signals = [s for s in raw.signals if s.kind == kind]
-        if kind != IMAGE:
-            return signals[0]
-        camera = self.get_query_argument("camera", None)
-        if camera is None or camera == "":
+        """The signal the request names: a camera (``camera``), a grid or vectors (``signal``), by
+        default the property's first."""
+        signals = [s for s in raw.signals if raw_property(s) == name]
+        parameter = "camera" if signals[0].kind == IMAGE else "signal"
+        asked = self.get_query_argument(parameter, None)
+        if asked is None or asked == "":
             return signals[0]
         for s in signals:
-            if s.name == camera:
+            if s.name == asked:
                 return s
-        raise tornado.web.HTTPError(400, reason=f"parameter 'camera': {camera!r} is not one of this device's "
-                                                f"cameras ({', '.join(s.name for s in signals)})")
+        raise tornado.web.HTTPError(400, reason=f"parameter {parameter!r}: {asked!r} is not one of {name}'s "
+                                                f"{parameter}s here ({', '.join(s.name for s in signals)})")
 
     def max_rate(self, signal: RawSignal) -> float:
         raw = self.get_query_argument("maxRate", None)

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 from typing import Any
 
+from wott_hub.td.raw import RAW_PROPERTIES
+
 from .binary import BinaryEventHandler, BinaryEventSocket
 from .context import ServingContext
 from .forms import PREFIX
 from .http import routes as http_routes
 from .raw import RawPropertyHandler, RawStreamHandler
-from .things import RAW_PROPERTIES
 
 __all__ = ["routes"]
 

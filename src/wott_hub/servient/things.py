@@ -16,10 +16,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wott_hub.events.record import encode
-from wott_hub.td.raw import PRESSURE_GRID, RAW_IMAGE
+from wott_hub.td.raw import RAW_PROPERTIES
 from wott_hub.types import RawReads
-
-RAW_PROPERTIES = frozenset({RAW_IMAGE, PRESSURE_GRID})
 
 __all__ = ["ServedThing", "ThingRegistry"]
 

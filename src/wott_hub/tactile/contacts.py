@@ -73,6 +73,14 @@ class WinklerForceModel:
             raise ValueError("modulus and thickness must be positive")
         self.node_stiffness = modulus_mpa * mesh.node_areas / thickness_mm  # N/mm
 
+    @classmethod
+    def uniform(cls, mesh: SkinMesh, stiffness: float) -> WinklerForceModel:
+        """Every node the same ``stiffness``: 1 when the node vectors are forces (a patch's force is
+        their sum), 0 when they say nothing of force (a magnetic field, a taxel's counts)."""
+        model = cls.__new__(cls)
+        model.node_stiffness = np.full(mesh.n_nodes, float(stiffness))
+        return model
+
     def force(self, nodes: np.ndarray, displacement: np.ndarray) -> np.ndarray:
         force: np.ndarray = self.node_stiffness[nodes] @ displacement[nodes]
         return force

@@ -8,9 +8,43 @@ from typing import Literal
 from .materials import Material
 from .mesh import SkinMesh
 
-__all__ = ["CoordinateFrame", "DeviceDescription", "SkinShape"]
+__all__ = ["DISPLACEMENT", "NODE_UNITS", "CoordinateFrame", "DeviceDescription", "NodeSignal", "SkinShape"]
 
 ShapeType = Literal["rectangularPrism", "cylinder", "barrel"]
+
+NODE_UNITS = {"displacement": "mm", "magneticField": "uT", "taxelSignal": "count", "force": "N"}
+"""What a node's vector may measure (its vocabulary term) and the unit it is always given in."""
+
+
+@dataclass(frozen=True, slots=True)
+class NodeSignal:
+    """What the 3-vector each frame gives a node measures (``TactileFrame.displacement`` carries it,
+    whatever it is): a skin's displacement in mm (the default), a magnetometer's field change in µT, a
+    taxel's signal change in counts (x, y shear, z normal), or a force in N. ε is in its unit; the TD
+    states that unit and declares ``skinDisplacement`` only for a displacement (docs/skins.md,
+    "Honest units"). A displacement becomes force through the skin's material, a force is summed, and
+    any other signal gives no force at all (``contactForces`` is then empty)."""
+
+    quantity: str = "displacement"
+
+    def __post_init__(self) -> None:
+        if self.quantity not in NODE_UNITS:
+            raise ValueError(f"node signal must be one of {', '.join(NODE_UNITS)}, got {self.quantity!r}")
+
+    @property
+    def unit(self) -> str:
+        return NODE_UNITS[self.quantity]
+
+    @property
+    def is_displacement(self) -> bool:
+        return self.quantity == "displacement"
+
+    @property
+    def gives_force(self) -> bool:
+        return self.quantity in ("displacement", "force")
+
+
+DISPLACEMENT = NodeSignal()
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,7 +77,8 @@ class DeviceDescription:
     ``side_lobe_ratio``: the largest spurious peak the device's estimate makes
     beside a press, as a fraction of the press's peak (a camera model's side
     lobes; 0 for a device that measures each node directly). Processing drops
-    contacts weaker than that beside a stronger one (docs/processing.md).
+    contacts weaker than that beside a stronger one (docs/processing.md). ``node_signal``: what the
+    frames' node vectors measure; ``epsilon_mm`` is in its unit (mm for the default displacement).
     """
 
     id: str
@@ -57,3 +92,4 @@ class DeviceDescription:
     thickness_mm: float = 3.0
     description: str = ""
     side_lobe_ratio: float = 0.0
+    node_signal: NodeSignal = DISPLACEMENT

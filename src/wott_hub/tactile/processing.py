@@ -47,8 +47,10 @@ class ProcessingParams:
     thickness_mm: float = 3.0
     actions: ActionParams = field(default_factory=ActionParams)
     # "winkler": independent springs under each node (cheap); "stiffness": the Kelvin-Voigt skin's
-    # assembled stiffness (wott_hub.tactile.mechanics), exact for quasi-static presses
+    # assembled stiffness (wott_hub.tactile.mechanics), exact for quasi-static presses; "sum": the node
+    # vectors are forces (N), a contact's is their sum; "none": they give no force (contactForces empty)
     force_model: str = "winkler"
+    unit: str = "mm"  # of ε and the node vectors (tactile.device.NodeSignal): in the below-threshold note
     below_threshold_s: float = 1.0  # a press this long in [floor x ε, ε] gets a health note; 0: never
     below_threshold_floor: float = BELOW_THRESHOLD_FLOOR  # x epsilon: the device's declared rest noise
     # contacts (docs/processing.md, "Contacts"): "peaks" (a watershed) or "components" (connected sets)
@@ -61,9 +63,16 @@ class ProcessingParams:
 
 
 def processing_params(desc: DeviceDescription) -> ProcessingParams:
-    """Processing settings from what the device says about itself."""
+    """Processing settings from what the device says about itself. Node vectors that are no
+    displacement (``desc.node_signal``) get no force from the material, and no collision: its speed
+    threshold is in mm/s of the deepest node."""
+    signal = desc.node_signal
+    extra: dict[str, Any] = {}
+    if not signal.is_displacement:
+        extra = {"force_model": "sum" if signal.gives_force else "none", "unit": signal.unit,
+                 "actions": ActionParams(collision_speed_mm_s=math.inf)}
     return ProcessingParams(epsilon_mm=desc.epsilon_mm, modulus_mpa=desc.material.modulus_mpa,
-                            thickness_mm=desc.thickness_mm, side_lobe_ratio=desc.side_lobe_ratio)
+                            thickness_mm=desc.thickness_mm, side_lobe_ratio=desc.side_lobe_ratio, **extra)
 
 
 @dataclass(slots=True, eq=False)
@@ -82,6 +91,7 @@ class FrameResult:
     actions: list[str]
     packet_due: bool
     details: tuple[ActionEvidence, ...] = ()  # one per action, same order
+    forces: bool = True  # the contacts' forces are measured or modelled (False: contactForces is empty)
 
     def action_details(self) -> list[dict[str, Any]]:
         """The ``actionDetails`` event payloads of this frame's actions (built only when asked)."""
@@ -110,7 +120,7 @@ class FrameResult:
         info: dict[str, Any] = {
             "numOfContacts": len(self.contacts),
             "contactLocations": [_xyz(c.location) for c in self.contacts],
-            "contactForces": [_xyz(c.force) for c in self.contacts],
+            "contactForces": [_xyz(c.force) for c in self.contacts] if self.forces else [],
         }
         if self.contacts:
             info["contactIds"] = [c.id for c in self.contacts]
@@ -139,8 +149,12 @@ class FrameProcessor:
             from .mechanics.forces import StiffnessForceModel  # assembles K once, here
 
             self._force = StiffnessForceModel(mesh, p.modulus_mpa, p.thickness_mm)
+        elif p.force_model in ("sum", "none"):
+            self._force = WinklerForceModel.uniform(mesh, 1.0 if p.force_model == "sum" else 0.0)
         else:
-            raise ValueError(f"force_model must be 'winkler' or 'stiffness', got {p.force_model!r}")
+            raise ValueError(f"force_model must be 'winkler', 'stiffness', 'sum' or 'none', "
+                             f"got {p.force_model!r}")
+        self._forces = p.force_model != "none"
         self._contacts = ContactFinder(mesh, self._force, p.min_contact_nodes, p.segmentation, p.epsilon_mm)
         self._tracker = ContactTracker(p.track_gate_mm or 3.0 * mesh_spacing(mesh))
         self._actions = ActionDetector(p.actions)
@@ -162,7 +176,8 @@ class FrameProcessor:
         self._below_lo, self._below_ns = floor * eps, int(seconds * 1e9)
         p = self.params
         self._merge_mm, self._birth_mm = p.merge_noise * self._below_lo, p.birth_noise * self._below_lo
-        self._below_text = (f"below threshold: displaced {floor * eps:g}-{eps:g} mm (epsilon {eps:g} mm) "
+        u, verb = p.unit, "displaced" if p.unit == "mm" else "changed"
+        self._below_text = (f"below threshold: {verb} {floor * eps:g}-{eps:g} {u} (epsilon {eps:g} {u}) "
                             f"for over {seconds:g} s: not reported")
         self.below_note, self._below_since = "", None
 
@@ -213,7 +228,8 @@ class FrameProcessor:
             intensity = np.zeros(len(deformed))
         actions = self._actions.update(t_ns, contacts)
         details = tuple(self._actions.details) if actions else ()
-        return FrameResult(t_ns, deformed, intensity, is_release, contacts, actions, due, details)
+        return FrameResult(t_ns, deformed, intensity, is_release, contacts, actions, due, details,
+                           self._forces)
 
     def _round(self, norms: np.ndarray) -> np.ndarray:
         """``np.round(norms, decimals)`` as the three ufuncs it runs, without its call overhead."""

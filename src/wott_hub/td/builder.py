@@ -8,7 +8,7 @@ from functools import cache
 from importlib import resources
 from typing import Any
 
-from wott_hub.tactile.device import DeviceDescription
+from wott_hub.tactile.device import DeviceDescription, NodeSignal
 from wott_hub.tactile.raw import RawSignal
 from wott_hub.types import FormFactory
 
@@ -86,7 +86,27 @@ def build_tactile_td(
     }
     if declared:
         td["actions"] = declared
+    if not desc.node_signal.is_displacement:
+        _node_signal(td, desc.node_signal)
     return state_defaults(td)
+
+
+def _node_signal(td: dict[str, Any], signal: NodeSignal) -> None:
+    """The TD of a device whose node vectors are no displacement (``NodeSignal``): its intensities and ε
+    in the signal's unit, no ``skinDisplacement`` (no vector in mm to give), and ``contactForces`` said to
+    be empty when the signal gives no force."""
+    q, unit = signal.quantity, signal.unit
+    td["tac:nodeSignal"] = q
+    td["events"].pop("skinDisplacement", None)
+    skin = td["events"]["skinDeformedDetection"]
+    skin["description"] = (f"Nodes whose {q} change (its norm, {unit}) exceeds epsilon ({unit}); absent "
+                           "nodes are at rest; one final packet lists the previously changed nodes with "
+                           "intensity 0.")
+    skin["data"]["properties"]["arrayOfDeformedNodes"]["items"]["properties"]["deformedNodeIntensity"][
+        "unit"] = unit
+    forces = td["properties"]["contactInformation"]["properties"]["contactForces"]
+    forces["description"] = ("The sum of the contact's nodes' measured forces." if signal.gives_force else
+                             f"Always empty: this device measures {q} ({unit}), which gives no force.")
 
 
 def static_property_values(desc: DeviceDescription) -> dict[str, Any]:

@@ -45,7 +45,7 @@ from wott_hub.events.fields import SKIN_DISPLACEMENT
 from wott_hub.types import FormFactory
 
 from .mqtt import MqttLayout
-from .raw import PRESSURE_GRID, RAW_IMAGE, RAW_TYPES
+from .raw import RAW_IMAGE, RAW_PROPERTIES, RAW_TYPES
 
 __all__ = ["BINARY_EVENTS", "CONTEXT_PATH", "NPY", "PREFIX", "STREAM", "FormLayout"]
 
@@ -131,7 +131,7 @@ class FormLayout:
     def raw_paths(self, thing: str) -> dict[str, str]:
         """Where a device's raw-signal properties are read (for the twin and tests)."""
         base = self.thing_url(thing)
-        return {name: f"{base}/properties/{name}" for name in (RAW_IMAGE, PRESSURE_GRID)}
+        return {name: f"{base}/properties/{name}" for name in sorted(RAW_PROPERTIES)}
 
     def thing_forms(self, thing: str) -> list[dict[str, Any]]:
         base = self.thing_url(thing)
@@ -155,5 +155,6 @@ def _raw_forms(href: str, name: str) -> list[dict[str, Any]]:
                 {"href": f"{href}?format=npy{{&camera}}", **read, "contentType": NPY},
                 {"href": f"{href}/stream{{?camera,maxRate}}", **observe, "contentType": MULTIPART}]
     return [{"href": href, **read, "contentType": JSON},
-            {"href": f"{href}?format=npy", **read, "contentType": NPY},
-            {"href": f"{href}/stream{{?maxRate}}", **observe, "subprotocol": "sse", "contentType": JSON}]
+            {"href": f"{href}?format=npy{{&signal}}", **read, "contentType": NPY},
+            {"href": f"{href}/stream{{?signal,maxRate}}", **observe, "subprotocol": "sse",
+             "contentType": JSON}]

@@ -1,4 +1,6 @@
-"""The affordances of a device's raw signals: ``rawImage`` (cameras), ``pressureGrid`` (taxel arrays).
+"""The affordances of a device's raw signals: ``rawImage`` (cameras), ``pressureGrid`` (taxel arrays), and the
+vectors of each node: ``magneticField`` (magnetic skins, µT), ``taxelSignal`` (3-axis taxels' counts),
+``taxelForce`` (their forces, N).
 
 Declared only by a device that has them (its driver's ``ServesRawSignals``, described by
 ``tactile.raw.RawSignal``), never recorded unless the device opts in, encoded only for a reader
@@ -6,8 +8,9 @@ Declared only by a device that has them (its driver's ``ServesRawSignals``, desc
 type (``td.forms``): ``rawImage`` as JSON (a base64 PNG string, what every WoT client can read),
 ``image/png``, ``image/jpeg``, ``application/x-npy`` and a ``multipart/x-mixed-replace`` stream a
 browser ``<img>`` shows; ``pressureGrid`` as a JSON object, ``application/x-npy`` and an SSE
-stream. ``uriVariables`` name the camera and the stream's rate (``maxRate``, per second), both
-checked by the hub (a 400 problem+json naming the parameter).
+stream, and so do the vector properties. ``uriVariables`` name the camera (``camera``) or the grid or vector
+signal (``signal``: ``raw`` as read, ``change`` less the baseline, as the driver names them) and the
+stream's rate (``maxRate``, per second), all checked by the hub (a 400 problem+json naming the parameter).
 
 A device that records its images (``RawSignal.record_hz``) also declares the event
 ``rawImageRecorded``: one recorded image (base64 PNG), replayed with the rest of history; one that
@@ -19,16 +22,24 @@ from __future__ import annotations
 
 from typing import Any
 
-from wott_hub.tactile.raw import GRID, IMAGE, RawSignal
+from wott_hub.tactile.raw import GRID, IMAGE, VECTOR_TERMS, RawSignal
 
 __all__ = ["DEFAULT_RATE_HZ", "MAX_RATE_HZ", "PRESSURE_GRID", "PRESSURE_GRID_RECORDED", "RAW_IMAGE",
-           "RAW_IMAGE_RECORDED", "RAW_TYPES", "raw_affordances", "raw_events"]
+           "RAW_IMAGE_RECORDED", "RAW_PROPERTIES", "RAW_TYPES", "raw_affordances", "raw_events",
+           "raw_property"]
 
 RAW_IMAGE = "rawImage"
 PRESSURE_GRID = "pressureGrid"
 RAW_IMAGE_RECORDED = "rawImageRecorded"
 PRESSURE_GRID_RECORDED = "pressureGridRecorded"
-RAW_TYPES = frozenset({"tac:RawImage", "tac:PressureGrid"})
+_VECTORS = {  # term -> (@type, what its vectors are)
+    "magneticField": ("tac:MagneticField", "the magnetic flux density at each magnetometer"),
+    "taxelSignal": ("tac:TaxelSignal", "each 3-axis taxel's counts (x, y shear, z normal)"),
+    "taxelForce": ("tac:TaxelForce", "the force on each 3-axis taxel, as its maker's calibration gives it"),
+}
+assert tuple(_VECTORS) == VECTOR_TERMS
+RAW_PROPERTIES = frozenset({RAW_IMAGE, PRESSURE_GRID, *VECTOR_TERMS})
+RAW_TYPES = frozenset({"tac:RawImage", "tac:PressureGrid", *(t for t, _ in _VECTORS.values())})
 """The ``@type`` of a raw-signal property: live only (a replay's TD leaves them out)."""
 
 MAX_RATE_HZ = 120.0
@@ -67,14 +78,28 @@ def _image(cameras: list[RawSignal]) -> dict[str, Any]:
     }
 
 
-def _grid(grid: RawSignal) -> dict[str, Any]:
+def raw_property(signal: RawSignal) -> str:
+    """The property that serves ``signal``."""
+    return {IMAGE: RAW_IMAGE, GRID: PRESSURE_GRID}.get(signal.kind, signal.term)
+
+
+def _which(signals: list[RawSignal]) -> dict[str, Any]:
+    names = [s.name for s in signals]
+    units = ", ".join(f"{s.name} {s.unit}" for s in signals)
+    return {"type": "string", "enum": names, "default": names[0],
+            "description": f"Which signal (default the first): {units}."}
+
+
+def _grid(grids: list[RawSignal]) -> dict[str, Any]:
+    grid = grids[0]
     rows, cols = grid.shape if len(grid.shape) == 2 else (0, 0)
     cell = {"type": "number", "unit": grid.unit} if grid.unit else {"type": "number"}
     return {
         "@type": "tac:PressureGrid",
         "title": PRESSURE_GRID,
-        "description": (f"The latest {rows} x {cols} pressure grid (rows along y, kPa), read when asked: "
-                        "JSON, NumPy .npy (float32 rows x cols) or an SSE stream at maxRate."),
+        "description": (f"The latest {rows} x {cols} pressure grid (rows along y, {grid.unit or 'no unit'}), "
+                        "read when asked: JSON, NumPy .npy (float32 rows x cols) or an SSE stream at "
+                        "maxRate."),
         "type": "object",
         "properties": {
             "timeStamp": {"type": "integer", "minimum": 0, "unit": "ns"},
@@ -85,7 +110,34 @@ def _grid(grid: RawSignal) -> dict[str, Any]:
         "required": ["timeStamp", "rows", "cols", "pressure"],
         "readOnly": True,
         "observable": True,
-        "uriVariables": {"maxRate": _max_rate(min(grid.rate_hz or DEFAULT_RATE_HZ, DEFAULT_RATE_HZ))},
+        "uriVariables": {"signal": _which(grids),
+                         "maxRate": _max_rate(min(grid.rate_hz or DEFAULT_RATE_HZ, DEFAULT_RATE_HZ))},
+    }
+
+
+def _vectors(term: str, signals: list[RawSignal]) -> dict[str, Any]:
+    first = signals[0]
+    n = first.shape[0] if first.shape else 0
+    kind, what = _VECTORS[term]
+    vector = {"type": "object", "properties": {a: {"type": "number", "unit": first.unit} for a in "xyz"},
+              "required": ["x", "y", "z"]}
+    return {
+        "@type": kind,
+        "title": term,
+        "description": (f"The latest value of {what} ({n} nodes, in skinNodes order, {first.unit}), read "
+                        "when asked: JSON, NumPy .npy (float32 N x 3) or an SSE stream at maxRate."),
+        "type": "object",
+        "properties": {
+            "timeStamp": {"type": "integer", "minimum": 0, "unit": "ns"},
+            "signal": {"type": "string", "enum": [s.name for s in signals]},
+            "numOfNodes": {"type": "integer", "minimum": 0},
+            "vectors": {"type": "array", "items": vector},
+        },
+        "required": ["timeStamp", "signal", "numOfNodes", "vectors"],
+        "readOnly": True,
+        "observable": True,
+        "uriVariables": {"signal": _which(signals),
+                         "maxRate": _max_rate(min(first.rate_hz or DEFAULT_RATE_HZ, DEFAULT_RATE_HZ))},
     }
 
 
@@ -97,13 +149,17 @@ def raw_affordances(signals: tuple[RawSignal, ...]) -> dict[str, dict[str, Any]]
     if cameras:
         out[RAW_IMAGE] = _image(cameras)
     if grids:
-        out[PRESSURE_GRID] = _grid(grids[0])
+        out[PRESSURE_GRID] = _grid(grids)
+    for term in VECTOR_TERMS:
+        vectors = [s for s in signals if s.term == term]
+        if vectors:
+            out[term] = _vectors(term, vectors)
     return out
 
 
 def raw_events(signals: tuple[RawSignal, ...]) -> dict[str, dict[str, Any]]:
     """``rawImageRecorded`` for a device that records images (a camera with ``record_hz`` > 0),
-    ``pressureGridRecorded`` for one that records its grid."""
+    ``pressureGridRecorded`` for one that records a grid."""
     out: dict[str, dict[str, Any]] = {}
     recorded = [s.name for s in signals if s.kind == IMAGE and s.record_hz > 0]
     if recorded:
@@ -127,7 +183,7 @@ def raw_events(signals: tuple[RawSignal, ...]) -> dict[str, dict[str, Any]]:
         }
     grids = [s for s in signals if s.kind == GRID and s.record_hz > 0]
     if grids:
-        schema = _grid(grids[0])
+        schema = _grid(grids)
         out[PRESSURE_GRID_RECORDED] = {
             "@type": "tac:PressureGridRecorded",
             "title": PRESSURE_GRID_RECORDED,

@@ -13,6 +13,8 @@ from typing import Any
 import jsonschema
 from wott_directory.validation import load_data, schema_problems
 
+from wott_hub.tactile.device import NODE_UNITS
+
 from .vocabulary import DETAIL_EVENTS, DETAIL_PROPERTIES, EVENTS, PROPERTIES, TD_CONTEXT
 
 __all__ = ["Problem", "validate_payload", "validate_td"]
@@ -73,11 +75,13 @@ def tactile_validator() -> jsonschema.protocols.Validator:
             s["properties"]["observable"] = {"const": True}
             s["required"].append("observable")
         prop_schemas[name] = s
-    event_schemas = {
-        name: {"type": "object", "properties": {"data": _shape_schema(aff["data"])},
-               "required": ["data"]}
-        for name, aff in EVENTS.items()
-    }
+    data = {name: _shape_schema(aff["data"]) for name, aff in EVENTS.items()}
+    # a node's intensity is in its device's node unit (tactile.device.NodeSignal: mm, µT, counts, N)
+    node = data["skinDeformedDetection"]["properties"]["properties"]["properties"]["arrayOfDeformedNodes"]
+    intensity = node["properties"]["items"]["properties"]["properties"]["properties"]["deformedNodeIntensity"]
+    intensity["properties"]["unit"] = {"enum": sorted(set(NODE_UNITS.values()))}
+    event_schemas = {name: {"type": "object", "properties": {"data": d}, "required": ["data"]}
+                     for name, d in data.items()}
     schema = {
         "type": "object",
         "properties": {

@@ -13,10 +13,11 @@ sequence numbers against the arrival times, fitted), not the arrival times
 themselves, which bunch and stretch with the reads; each ``frames()`` call starts
 a new line.
 
-Raw signal (``ServesRawSignals``): the pressure grid, rows x cols kPa, the last frame's
-(a reference to the array the frame carries, reshaped as a view when read); recorded in history as
-``pressureGridRecorded`` events ``record_hz`` times a second when the device opts in
-(``record_raw_hz``: learning exports read it, docs/learning.md of wott-hub).
+What the counts mean is the ``readings``' (``readings.py``): pressure through the skin's compliance
+(the project's protocols), or counts above a baseline (FlexiTac, 3D-ViTac); so are the raw signals
+(``ServesRawSignals``: the last frame's grids) and what ``tare`` takes again. The first grid is
+recorded in history as ``pressureGridRecorded`` events ``record_hz`` times a second when the device
+opts in (``record_raw_hz``: learning exports read it, docs/learning.md of wott-hub).
 """
 
 from __future__ import annotations
@@ -24,8 +25,6 @@ from __future__ import annotations
 import asyncio
 from collections.abc import AsyncIterator, Callable
 from typing import Any
-
-import numpy as np
 
 from wott_hub.plugin_api import (
     Backoff,
@@ -44,18 +43,23 @@ from .clock import FrameClock
 from .compliance import Compliance
 from .protocol import Counters
 from .reader import SerialReader
+from .readings import CountReadings, PressureReadings, Readings
 from .simulator import TaxelSimulator
 
-__all__ = ["TaxelDriver"]
+__all__ = ["QUEUE_FRAMES", "TaxelDriver"]
+
+QUEUE_FRAMES = 256
+"""Frames read but not yet processed, at most: 2.5 s at 100 frames/s (a busy hub catches up, none lost)."""
 
 
 class TaxelDriver(Driver, Tareable, ServesRawSignals):
     """A rows x cols taxel array on ``port`` (or on its own simulator's pty).
 
-    Each taxel's pressure becomes an inward displacement along the mesh
-    normal through ``compliance``; ``frame.pressure`` carries the pressure in
-    kPa. ``counters`` and ``last_seq`` (the sequence number of the frame just
-    yielded) are there for diagnostics and for checking against a simulator.
+    With a ``compliance``, each taxel's pressure becomes an inward displacement along the mesh
+    normal; ``frame.pressure`` carries the pressure in kPa. Without one (an uncalibrated matrix),
+    the node vectors are the counts above a baseline of ``baseline_frames`` frames
+    (``description.node_signal`` says so). ``counters`` and ``last_seq`` (the sequence number of the
+    frame just yielded) are there for diagnostics and for checking against a simulator.
     """
 
     def __init__(
@@ -63,7 +67,8 @@ class TaxelDriver(Driver, Tareable, ServesRawSignals):
         description: DeviceDescription,
         *,
         shape: tuple[int, int],
-        compliance: Compliance,
+        compliance: Compliance | None = None,
+        baseline_frames: int = 30,
         port: str | None = None,
         baudrate: int = 921600,
         protocol: str = "binary",
@@ -93,13 +98,12 @@ class TaxelDriver(Driver, Tareable, ServesRawSignals):
         self._reader: SerialReader | None = None
         self._failure = ""  # the exception that ended the last stream, until a frame gets through
         self._link_health: tuple[Health, str] = (Health.disconnected, "not started")
-        self._inward = -description.mesh.normals
-        self._zero: np.ndarray | None = None  # counts at rest after a tare, subtracted from every frame
-        self._tare_next = False
+        inward = -description.mesh.normals
         rate = float(simulator.rate_hz) if simulator is not None else 0.0
-        self.raw_signals = (RawSignal("pressure", "grid", shape, unit="kPa", rate_hz=rate,
-                                      record_hz=record_hz),)
-        self._pressure: tuple[int, np.ndarray] | None = None  # the last frame's (t_ns, kPa per taxel)
+        self.readings: Readings = (PressureReadings(compliance, inward, shape, rate, record_hz)
+                                   if compliance is not None
+                                   else CountReadings(inward, shape, rate, baseline_frames, record_hz))
+        self.raw_signals: tuple[RawSignal, ...] = self.readings.raw_signals
         self.set_health(Health.disconnected, "not started")
 
     async def frames(self) -> AsyncIterator[TactileFrame]:
@@ -111,23 +115,18 @@ class TaxelDriver(Driver, Tareable, ServesRawSignals):
         self._reader = reader = SerialReader(
             port, shape=self.shape, baudrate=self.baudrate, protocol=self.protocol, counters=self.counters,
             backoff=self._backoff, opener=self._opener, on_health=self._on_link_health,
+            queue_size=QUEUE_FRAMES,
         )
-        compliance = self.compliance
+        readings = self.readings
         clock = self.clock
         clock.reset()
         failed = False
         try:
             async for arrival_ns, raw in reader.frames():
                 self.last_seq = raw.seq
-                t_ns = clock.stamp(raw.seq, arrival_ns)
-                counts = raw.values.astype(np.float64)
-                if self._tare_next:  # this frame's readings are the new zero
-                    self._zero, self._tare_next = counts.copy(), False
-                if self._zero is not None:
-                    counts = np.maximum(counts - self._zero, 0.0)
-                frame = TactileFrame(t_ns, compliance.normal_mm(counts)[:, None] * self._inward,
-                                     pressure=compliance.pressure_kpa(counts))
-                self._pressure = (t_ns, frame.pressure)  # type: ignore[assignment]  # set just above
+                frame = readings.frame(clock.stamp(raw.seq, arrival_ns), raw.values)
+                if frame is None:  # a reading that makes no frame (the first baseline is being taken)
+                    continue
                 if self._failure:
                     self._failure = ""
                     self.set_health(*self._link_health)
@@ -141,16 +140,11 @@ class TaxelDriver(Driver, Tareable, ServesRawSignals):
                 self.set_health(Health.disconnected, f"frames() failed: {self._failure}")
 
     def tare(self) -> str:
-        """Zero offsets: the next frame's readings become every taxel's zero (drift, a preloaded skin)."""
-        self._tare_next = True
-        return "the next frame's readings are each taxel's new zero"
+        """Zero offsets again (drift, a preloaded skin): what that means is the readings'."""
+        return self.readings.tare()
 
     def raw_sample(self, name: str) -> RawSample | None:
-        """The pressure grid of the last frame, rows x cols kPa (``name`` ``"pressure"``)."""
-        last = self._pressure
-        if name != "pressure" or last is None:
-            return None
-        return RawSample(last[0], last[1].reshape(self.shape))
+        return self.readings.raw_sample(name)
 
     def _on_link_health(self, state: Health, reason: str) -> None:
         """The reader's health (from its thread), with the cause of the last failure while it stands."""

@@ -7,7 +7,7 @@ plugins or loading the registry costs nothing for hubs without taxel arrays.
 from __future__ import annotations
 
 from importlib import resources
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal, NamedTuple
 
 from wott_hub.plugin_api import (
     MATERIALS,
@@ -24,6 +24,27 @@ from wott_hub.plugin_api import (
 FAMILY = "taxel-array"
 DEMO_SCENE = "demo.toml"
 
+
+class Preset(NamedTuple):
+    """A protocol's defaults: its array, its line speed, and ε in counts for an uncalibrated matrix."""
+
+    rows: int
+    cols: int
+    baudrate: int
+    epsilon_counts: float | None  # None: a calibrated array (pressure, ε in mm)
+
+
+PRESETS = {
+    "binary": Preset(16, 16, 921600, None),
+    "ascii": Preset(16, 16, 921600, None),
+    # flexitac 0.3.1 (PyPI): 12 x 32 at 2,000,000 baud, contact threshold 25 counts above the baseline
+    "flexitac": Preset(12, 32, 2_000_000, 25.0),
+    # 3D-ViTac MatrixArray.ino: 16 x 16 at 2,000,000 baud; multi_thread_contact.py: THRESHOLD = 12
+    "3dvitac": Preset(16, 16, 2_000_000, 12.0),
+}
+SIM_MM_PER_COUNT = 0.01
+"""A simulated 8-bit matrix reads one count per 10 µm of inward displacement (about 2 mm to full scale)."""
+
 class TaxelSettings(BackoffSettings):
     """A taxel array's settings, declared once: types, bounds (NaN and infinities can pass none
     of them), defaults and descriptions; ``SCHEMA`` is derived for docs and the registry."""
@@ -37,11 +58,15 @@ class TaxelSettings(BackoffSettings):
     title: Annotated[str, Meta(description="Human-readable name; default the device id.")] | None = None
     port: Annotated[str, Meta(min_length=1, description=(
         "Serial device (/dev/ttyUSB0, COM3) or pyserial URL (socket://host:port)."))] | None = None
-    baudrate: Annotated[int, Meta(ge=1, le=12_000_000, description="Bits per second.")] = 921600
-    protocol: Annotated[Literal["binary", "ascii"], Meta(
-        description="Framed binary or ASCII lines (docs/taxel-protocol.md).")] = "binary"
-    rows: Annotated[int, Meta(ge=2, le=255, description="Taxel rows (along device y).")] = 16
-    cols: Annotated[int, Meta(ge=2, le=255, description="Taxel columns (along device x).")] = 16
+    baudrate: Annotated[int, Meta(ge=1, le=12_000_000, description=(
+        "Bits per second; default the protocol's (921600; flexitac and 3dvitac 2000000)."))] | None = None
+    protocol: Annotated[Literal["binary", "ascii", "flexitac", "3dvitac"], Meta(
+        description=("Framed binary or ASCII lines (docs/taxel-protocol.md), or an uncalibrated matrix: "
+                     "FlexiTac, 3D-ViTac (docs/skins.md)."))] = "binary"
+    rows: Annotated[int, Meta(ge=2, le=255, description=(
+        "Taxel rows (along device y); default the protocol's (16; flexitac 12)."))] | None = None
+    cols: Annotated[int, Meta(ge=2, le=255, description=(
+        "Taxel columns (along device x); default the protocol's (16; flexitac 32)."))] | None = None
     pitch_mm: Annotated[float, Meta(gt=0, le=100, description="Taxel spacing, mm.")] = 4.0
     material: Annotated[str, Meta(extra_json_schema={"enum": sorted(MATERIALS)}, description=(
         "Skin over the taxels (its modulus sets the compliance)."))] = "ecoflex-00-30"
@@ -50,7 +75,12 @@ class TaxelSettings(BackoffSettings):
     kpa_per_count: Annotated[float, Meta(gt=0, le=10, description=(
         "Pressure of one count of a 16-bit taxel value, kPa."))] = 0.01
     epsilon_mm: Annotated[float, Meta(gt=0, le=100, description=(
-        "Displacement above which a taxel counts as deformed, mm."))] = 0.05
+        "Displacement above which a taxel counts as deformed, mm (binary, ascii)."))] = 0.05
+    epsilon_counts: Annotated[float, Meta(gt=0, le=255, description=(
+        "Counts above the baseline from which a taxel counts as pressed (flexitac, 3dvitac); default "
+        "the makers' readers' thresholds (flexitac 25, 3dvitac 12)."))] | None = None
+    baseline_frames: Annotated[int, Meta(ge=1, le=1000, description=(
+        "Frames whose per-taxel median is the baseline (flexitac, 3dvitac), at start and on tare."))] = 30
     simulate: Annotated[bool, Meta(description=(
         "Play a scene on a simulated board over a pty instead of opening port."))] = False
     scene: Annotated[str, Meta(description=(
@@ -96,6 +126,7 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
     from wott_hub.plugin_api import (
         CoordinateFrame,
         DeviceDescription,
+        NodeSignal,
         Scene,
         SceneError,
         SettingsError,
@@ -112,12 +143,14 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
 
     with naming_device(config):
         s = read_settings(TaxelSettings, config.settings)
-        rows, cols = s.rows, s.cols
+        preset = PRESETS[s.protocol]
+        rows, cols = s.rows or preset.rows, s.cols or preset.cols
+        counted = preset.epsilon_counts is not None  # an uncalibrated matrix: its counts, not pressure
         if s.port is None and not s.simulate:
             raise SettingsError("setting 'port': required setting is missing")
         if s.material not in MATERIALS:
             raise SettingsError(f"setting 'material': {s.material!r} is not one of {sorted(MATERIALS)}")
-        if rows * cols > MAX_VALUES:
+        if not counted and rows * cols > MAX_VALUES:
             raise SettingsError(f"setting 'rows': {rows} x {cols} taxels do not fit a frame "
                                 f"(max {MAX_VALUES} values)")
         if s.backoff_cap_s < s.backoff_initial_s:
@@ -126,15 +159,19 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
     pitch, thickness = s.pitch_mm, s.thickness_mm
     material = MATERIALS[s.material]
     mesh = flat_pad(rows, cols, pitch_mm=pitch, clamp_border=False, name=f"taxel-{rows}x{cols}")
+    epsilon = s.epsilon_mm if preset.epsilon_counts is None else s.epsilon_counts or preset.epsilon_counts
     desc = DeviceDescription(
         id=config.id, title=s.title or config.id, family=FAMILY,
         shape=SkinShape("rectangularPrism", length_mm=cols * pitch, width_mm=rows * pitch,
                         height_mm=thickness),
         material=material, mesh=mesh, frame=CoordinateFrame(origin_name="cornerOfPad"),
-        epsilon_mm=s.epsilon_mm, thickness_mm=thickness,
-        description=f"{rows} x {cols} taxel array, {pitch:g} mm pitch, {s.protocol} protocol",
+        epsilon_mm=epsilon, thickness_mm=thickness,
+        description=f"{rows} x {cols} taxel array, {pitch:g} mm pitch, {s.protocol} protocol"
+                    + (" (counts above a baseline, no pressure calibration)" if counted else ""),
+        node_signal=NodeSignal("taxelSignal") if counted else NodeSignal(),
     )
-    compliance = Compliance(material.modulus_mpa * 1000.0, thickness, s.kpa_per_count)
+    modulus_kpa = material.modulus_mpa * 1000.0
+    compliance = Compliance(modulus_kpa, thickness, s.kpa_per_count)
     simulator = None
     if s.simulate:
         with naming_device(config):
@@ -146,10 +183,13 @@ def open_taxel_device(config: DeviceConfig) -> Driver:
                                             source=f"wott_driver_taxel/scenes/{DEMO_SCENE}")
             except SceneError as e:
                 raise SettingsError(f"setting 'scene': {e}") from None
-        simulator = TaxelSimulator(scene, mesh, (rows, cols), compliance, rate_hz=s.rate_hz,
-                                   protocol=s.protocol)
+        wire = compliance  # an 8-bit matrix reads a coarser count
+        if counted:
+            wire = Compliance(modulus_kpa, thickness, SIM_MM_PER_COUNT * modulus_kpa / thickness)
+        simulator = TaxelSimulator(scene, mesh, (rows, cols), wire, rate_hz=s.rate_hz, protocol=s.protocol)
         desc = replace(desc, description=desc.description + " (simulated)")
     return TaxelDriver(
-        desc, shape=(rows, cols), compliance=compliance, port=s.port, baudrate=s.baudrate,
+        desc, shape=(rows, cols), compliance=None if counted else compliance,
+        baseline_frames=s.baseline_frames, port=s.port, baudrate=s.baudrate or preset.baudrate,
         protocol=s.protocol, simulator=simulator, backoff=reconnect, record_hz=s.record_raw_hz,
     )

@@ -24,13 +24,13 @@ import binascii
 import re
 import struct
 from dataclasses import asdict, dataclass
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
 __all__ = [
-    "Counters", "FrameDecoder", "LineDecoder", "RawFrame", "SYNC", "crc16", "encode_frame",
-    "encode_line", "make_decoder",
+    "Counters", "DecoderBase", "FrameDecoder", "LineDecoder", "RawFrame", "SYNC", "crc16", "encode_frame",
+    "encode_line",
 ]
 
 SYNC = b"\xa5\x5a"
@@ -66,12 +66,14 @@ class Counters:
     reconnects: int = 0  # successful re-opens of the port after losing it
     dropped: int = 0  # decoded frames discarded because the consumer fell behind
 
+    FAULTS: ClassVar[tuple[str, ...]] = ("bad_crc", "truncated", "resyncs", "gaps", "wrong_shape")
+    """Everything that makes the link ``degraded`` while it keeps happening (the reader names them)."""
+
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
 
     @property
     def faults(self) -> int:
-        """Everything that makes the link ``degraded`` while it keeps happening."""
         return self.bad_crc + self.truncated + self.resyncs + self.gaps + self.wrong_shape
 
 
@@ -106,7 +108,7 @@ class _Tracker:
         self.expected = None
 
 
-class _Decoder:
+class DecoderBase:
     """Shared state: the buffer, the sequence tracker, and whether we are still joining.
 
     ``joining`` (the reader's setting, and the state after ``reset``): the link
@@ -153,7 +155,7 @@ class _Decoder:
         return len(self._buf)
 
 
-class FrameDecoder(_Decoder):
+class FrameDecoder(DecoderBase):
     """Binary frames out of an arbitrary byte stream, resynchronising on SYNC.
 
     ``expect`` (rows, cols) is the configured array: larger headers are
@@ -242,7 +244,7 @@ _SEP = re.compile(rb"[,\s]+")
 _HEX4 = re.compile(rb"^[0-9A-Fa-f]{4}$")
 
 
-class LineDecoder(_Decoder):
+class LineDecoder(DecoderBase):
     """ASCII lines; the configured shape is required (a line does not carry one).
 
     When ``joining`` (the reader's setting) the bytes up to the first newline
@@ -277,11 +279,15 @@ class LineDecoder(_Decoder):
             pos = nl + 1
             if self._skipping or self._first_line:
                 self._skipping = self._first_line = False
-                self._garbage(len(line) + 1)
+                self._discard(line)
                 continue
             self._line(line, out)
         del buf[:pos]
         return out
+
+    def _discard(self, line: bytes) -> None:
+        """A line dropped unread: the rest of one too long, or the first after joining."""
+        self._garbage(len(line) + 1)
 
     def _line(self, line: bytes, out: list[RawFrame]) -> None:
         text = line.rstrip(b"\r")
@@ -335,17 +341,6 @@ class LineDecoder(_Decoder):
         self._skipping = False
         self._joining = self._first_line = True
         self.seq.reset()
-
-
-def make_decoder(
-    protocol: str, expect: tuple[int, int], counters: Counters | None = None
-) -> FrameDecoder | LineDecoder:
-    """The reader's decoder, joining: a port is usually opened in the middle of a frame."""
-    if protocol == "binary":
-        return FrameDecoder(expect, counters, joining=True)
-    if protocol == "ascii":
-        return LineDecoder(expect, counters, joining=True)
-    raise ValueError(f"unknown protocol {protocol!r}: expected 'binary' or 'ascii'")
 
 
 def _check_values(values: np.ndarray) -> np.ndarray:

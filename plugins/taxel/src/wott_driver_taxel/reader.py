@@ -11,6 +11,9 @@ When the port fails (unplugged adapter, pty hung up, device reset) the reader
 closes it, counts a frame in progress as truncated, reports ``disconnected``
 with the reason and re-opens it with exponential backoff; after a re-open the
 decoder starts afresh (the sequence may restart with the device).
+
+The decoder is the taxel array's (``make_decoder``: its four protocols) or any ``Decoder``: bytes in,
+items out, with counters whose ``FAULTS`` make the link ``degraded`` (the AnySkin plugin's frames).
 """
 
 from __future__ import annotations
@@ -19,22 +22,56 @@ import asyncio
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
-from typing import Any
+from typing import Any, ClassVar, Protocol
 
 import serial
 
 from wott_hub.plugin_api import Backoff, Health
 
-from .protocol import Counters, RawFrame, make_decoder
+from .matrix import FlexiTacDecoder, VitacDecoder
+from .protocol import Counters, FrameDecoder, LineDecoder
 
-__all__ = ["SerialReader"]
+__all__ = ["PROTOCOLS", "Decoder", "LinkCounters", "SerialReader", "make_decoder"]
 
 _STOP = object()
-_FAULT_FIELDS = ("bad_crc", "truncated", "resyncs", "gaps", "wrong_shape")
+
+PROTOCOLS: dict[str, Callable[..., Decoder]] = {
+    "binary": FrameDecoder, "ascii": LineDecoder, "flexitac": FlexiTacDecoder, "3dvitac": VitacDecoder}
+
+
+class LinkCounters(Protocol):
+    """What a decoder counts: ``FAULTS`` name the fields that make the link degraded while they grow."""
+
+    FAULTS: ClassVar[tuple[str, ...]]
+    dropped: int
+    reconnects: int
+
+    @property
+    def faults(self) -> int: ...
+
+    def as_dict(self) -> dict[str, int]: ...
+
+
+class Decoder(Protocol):
+    counters: Any  # a LinkCounters (Any: a dataclass's fields are not the protocol's attributes to mypy)
+
+    def feed(self, data: bytes | bytearray) -> list[Any]: ...
+
+    def reset(self) -> None: ...
+
+
+def make_decoder(protocol: str, expect: tuple[int, int], counters: Counters | None = None) -> Decoder:
+    """The taxel array's decoder, joining: a port is usually opened in the middle of a frame."""
+    try:
+        kind = PROTOCOLS[protocol]
+    except KeyError:
+        raise ValueError(f"unknown protocol {protocol!r}: expected one of {', '.join(PROTOCOLS)}") from None
+    return kind(expect, counters, joining=True)
 
 
 class SerialReader:
-    """Frames from ``port`` as ``(t_ns, RawFrame)``, ``t_ns`` the wall-clock time they were read.
+    """Frames from ``port`` as ``(t_ns, item)``, ``t_ns`` the wall-clock time they were read; an item is
+    a ``RawFrame`` of the taxel protocols (``shape``, ``protocol``), or what ``decoder`` gives.
 
     ``opener`` replaces ``serial.serial_for_url(port, baudrate, timeout=...)``
     (e.g. to hand over a ``loop://`` port); ``on_health(state, reason)`` is
@@ -45,10 +82,11 @@ class SerialReader:
         self,
         port: str,
         *,
-        shape: tuple[int, int],
+        shape: tuple[int, int] | None = None,
         baudrate: int = 921600,
         protocol: str = "binary",
         counters: Counters | None = None,
+        decoder: Decoder | None = None,
         backoff: Backoff | None = None,
         opener: Callable[[], Any] | None = None,
         on_health: Callable[[Health, str], None] | None = None,
@@ -59,8 +97,12 @@ class SerialReader:
     ) -> None:
         self.port = port
         self.baudrate = baudrate
-        self.counters = counters if counters is not None else Counters()
-        self.decoder = make_decoder(protocol, shape, self.counters)
+        if decoder is None:
+            if shape is None:
+                raise ValueError("a taxel protocol's reader needs the array's shape")
+            decoder = make_decoder(protocol, shape, counters if counters is not None else Counters())
+        self.decoder = decoder
+        self.counters: LinkCounters = decoder.counters
         self.backoff = backoff or Backoff()
         self.read_timeout_s = read_timeout_s
         self.silence_s = silence_s
@@ -97,7 +139,7 @@ class SerialReader:
             self._health(Health.degraded, f"no frames from {self.port} for more than {self.silence_s:g} s")
         elif now - self._last_fault_t < self.degrade_window_s:
             c = self.counters.as_dict()
-            parts = [f"{c[k] - self._ok_snapshot[k]} {k.replace('_', ' ')}" for k in _FAULT_FIELDS
+            parts = [f"{c[k] - self._ok_snapshot[k]} {k.replace('_', ' ')}" for k in self.counters.FAULTS
                      if c[k] != self._ok_snapshot[k]]
             self._health(Health.degraded, "link errors: " + ", ".join(parts))
         else:
@@ -196,7 +238,7 @@ class SerialReader:
         if self._thread is not None:
             await asyncio.to_thread(self._thread.join, 5.0)
 
-    async def frames(self) -> AsyncIterator[tuple[int, RawFrame]]:
+    async def frames(self) -> AsyncIterator[tuple[int, Any]]:
         self.start()
         assert self._queue is not None
         try:

@@ -8,15 +8,12 @@ encoded in the configured protocol. The ground truth of the recent frames is
 kept by sequence number, so a test can compare what the hub recovered with
 what was pressed.
 
-Like a board powered from the USB cable, it stops sending while unplugged and
-restarts its sequence at 0 when plugged back in. A late writer thread skips
-scene time rather than bursting, but never skips sequence numbers.
+Its line (``line.SimulatedLine``) paces it, stops while unplugged and skips scene time when late;
+plugged back in, the board restarts its sequence at 0, which never skips a number.
 """
 
 from __future__ import annotations
 
-import threading
-import time
 from collections import OrderedDict
 from pathlib import Path
 
@@ -25,10 +22,15 @@ import numpy as np
 from wott_hub.plugin_api import Scene, SkinMesh
 
 from .compliance import Compliance
+from .line import SimulatedLine
+from .matrix import encode_3dvitac, encode_flexitac
 from .protocol import SEQ_MODULO, encode_frame, encode_line
 from .pty_port import PtyPort
 
-__all__ = ["TaxelSimulator"]
+__all__ = ["REST_COUNTS", "TaxelSimulator"]
+
+REST_COUNTS = 20
+"""What an 8-bit matrix reads at rest (flexitac 0.3.1: "typical resting ADC values land around 10-40")."""
 
 
 class TaxelSimulator:
@@ -48,7 +50,7 @@ class TaxelSimulator:
         if rows * cols != mesh.n_nodes:
             raise ValueError(f"a {rows} x {cols} array needs a mesh of {rows * cols} nodes, "
                              f"got {mesh.n_nodes}")
-        if protocol not in ("binary", "ascii"):
+        if protocol not in ("binary", "ascii", "flexitac", "3dvitac"):
             raise ValueError(f"unknown protocol {protocol!r}")
         if not rate_hz > 0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
@@ -58,17 +60,20 @@ class TaxelSimulator:
         self.compliance = compliance
         self.rate_hz = float(rate_hz)
         self.protocol = protocol
-        self.port = PtyPort(link)
-        self.frames_sent = 0
-        self.frames_dropped = 0  # the line was busy (nobody reading): a real UART overruns too
+        self.line = SimulatedLine(PtyPort(link), rate_hz, self._make, on_replug=self._restart)
+        self.port = self.line.port
         self._history = history
         self._truth: OrderedDict[int, np.ndarray] = OrderedDict()
         self._seq = 0
-        self._out = bytearray()
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._normals = mesh.normals
+
+    @property
+    def frames_sent(self) -> int:
+        return self.line.frames_sent
+
+    @property
+    def frames_dropped(self) -> int:
+        return self.line.frames_dropped
 
     # -- the signal ------------------------------------------------------------
     def frame(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -78,79 +83,48 @@ class TaxelSimulator:
         return self.compliance.counts(inward).reshape(self.shape), truth
 
     def encode(self, seq: int, counts: np.ndarray) -> bytes:
+        """One frame on the wire; an 8-bit matrix (no sequence number) reads its counts above its rest."""
         if self.protocol == "binary":
             return encode_frame(seq, counts)
-        return encode_line(seq, counts)
+        if self.protocol == "ascii":
+            return encode_line(seq, counts)
+        values = np.minimum(counts.astype(np.int64) + REST_COUNTS, 255)
+        return encode_flexitac(values) if self.protocol == "flexitac" else encode_3dvitac(values)
 
     def truth(self, seq: int) -> np.ndarray | None:
         """Ground truth of the recent frame sent with sequence number ``seq`` (None if forgotten)."""
-        with self._lock:
+        with self.line.lock:
             return self._truth.get(seq)
 
-    # -- the line --------------------------------------------------------------
-    def _send(self, k: int) -> None:
+    def _make(self, k: int) -> bytes:
+        """Frame ``k``, numbered (the line holds its lock)."""
         counts, truth = self.frame(k)
-        with self._lock:
-            if not self.port.plugged:
-                return
-            seq = self._seq
-            self._seq = (seq + 1) % SEQ_MODULO
-            self._truth[seq] = truth
-            while len(self._truth) > self._history:
-                self._truth.popitem(last=False)
-            data = self.encode(seq, counts)
-            if len(self._out) > 4 * len(data):
-                self.frames_dropped += 1
-            else:
-                self._out += data
-                self.frames_sent += 1
-            del self._out[: self.port.write(bytes(self._out))]
+        seq = self._seq
+        self._seq = (seq + 1) % SEQ_MODULO
+        self._truth[seq] = truth
+        while len(self._truth) > self._history:
+            self._truth.popitem(last=False)
+        return self.encode(seq, counts)
 
-    def _run(self) -> None:
-        period = 1.0 / self.rate_hz
-        t0 = time.monotonic()
-        k = 0
-        while not self._stop.is_set():
-            delay = t0 + k * period - time.monotonic()
-            if delay > 0:
-                if self._stop.wait(delay):
-                    break
-            elif delay < -period:
-                k += int(-delay / period)  # late: skip scene time, keep the sequence gapless
-                continue
-            self._send(k)
-            k += 1
+    def _restart(self) -> None:
+        """Plugged back in: the board counts from 0 again."""
+        self._seq = 0
+        self._truth.clear()
 
+    # -- the line --------------------------------------------------------------
     def write_raw(self, data: bytes) -> None:
         """Put arbitrary bytes on the line between frames (noise, a boot banner)."""
-        with self._lock:
-            self._out += data
-            del self._out[: self.port.write(bytes(self._out))]
+        self.line.write_raw(data)
 
     def unplug(self) -> None:
-        with self._lock:
-            self.port.unplug()
-            self._out.clear()
+        self.line.unplug()
 
     def replug(self) -> str:
-        with self._lock:
-            path = self.port.replug()
-            self._seq = 0
-            self._truth.clear()
-            return path
+        return self.line.replug()
 
-    # -- lifecycle -------------------------------------------------------------
     def start(self) -> str:
         """Open the pty and start sending; returns the path a reader opens."""
-        path = self.port.open()
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name=f"taxel-sim {path}", daemon=True)
-            self._thread.start()
-        return path
+        return self.line.start()
 
     def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        with self._lock:
-            self.port.close()
+        self.line.stop()

@@ -93,6 +93,11 @@ async function show(tdUrl, {after = null, mode = "live"} = {}) {
   drawMesh(skin);
   const vectors = !!(td.events || {}).skinDisplacement; // the geometry from the vectors
   state.vectors = vectors;
+  // a skin whose nodes measure no displacement (tac:nodeSignal: a field in µT, counts) is coloured, not dented
+  const unit = intensityUnit(td);
+  state.dents = unit === "mm";
+  const label = document.querySelector("#colourbar .cb-title");
+  if (label) label.textContent = state.dents ? "‖D‖ mm" : `${td["tac:nodeSignal"] || "change"} ${unit}`;
   const v = (view = {td, skin, streams: [], contactStream: null, url: tdUrl, vectors});
   if (contacts) setContacts(contacts);
   if (contacts) pendingForces = contacts;
@@ -149,6 +154,12 @@ function drawMesh(skin) {
     get i() { return skin.i; },
     get intensity() { return skin.intensity; },
   }];
+}
+
+function intensityUnit(td) {
+  const skin = ((td.events || {}).skinDeformedDetection || {}).data || {};
+  const node = ((skin.properties || {}).arrayOfDeformedNodes || {}).items || {};
+  return ((node.properties || {}).deformedNodeIntensity || {}).unit || "mm";
 }
 
 function colourBar() {
@@ -265,7 +276,7 @@ function draw() {
   pending = null;
   const t0 = now();
   const skin = view.skin;
-  skin.apply(job.packet, scale, !!job.redraw);
+  skin.apply(job.packet, state.dents === false ? 0 : scale, !!job.redraw);
   state.applied = {seq: job.seq, max: job.max, at: t0};
   for (const o of state.onsets) if (o.applied === null && o.seq <= job.seq) o.applied = t0;
   if (job.max > state.cmax) {
