@@ -38,7 +38,7 @@ Contract (what keeps the writer from ever wedging):
   process took the writer lease (this writer then records nothing more).
 - With ``process=True`` (the hub's ``history_process``, on by default) each batch is encoded
   and written by a process of its own (``batch_process.py``), off the GIL of the process that
-  submits, while the writer keeps up (``_CATCH_UP``); the rest stays here. A process that exits
+  submits, while the writer keeps up (``batch_writer.CATCH_UP``); the rest stays here. A process that exits
   fails the batch in hand, which is retried.
 - The writer takes its hub's lease in the database (``lease.py``, keyed by
   ``hub_id``) before its first Thing is registered, refreshes it, and releases
