@@ -76,8 +76,10 @@ def _run_and_measure(folder: Path, running_hub, sse_ids, eventually) -> dict:
 
 def _hub_pid(uv_pid: int) -> int:
     """The hub's own process under ``uv run`` (its child), for its RSS."""
-    children = Path(f"/proc/{uv_pid}/task/{uv_pid}/children").read_text().split()
-    return int(children[0]) if children else uv_pid
+    children = [int(p) for task in Path(f"/proc/{uv_pid}/task").iterdir()  # uv forks from any of its threads
+                for p in (task / "children").read_text().split()]
+    assert children, f"no process under uv ({uv_pid})"
+    return children[0]
 
 
 def _rest_rss(tmp_path: Path, running_hub, sse_ids, eventually) -> float:
