@@ -68,7 +68,7 @@ from .batch_process import BatchProcess
 from .db_errors import driver_message
 from .engines import open_storage
 from .lease import DEFAULT_HUB_ID, LEASE_STALE_S
-from .retention import Retention
+from .retention import Retention, RetentionClock
 from .spool import Spool, SpoolRow
 from .storage import Prepared, Step, StorageWriter
 
@@ -156,7 +156,7 @@ class HistoryWriter:
         self._stop = False
         self._thread: threading.Thread | None = None
         self._process = BatchProcess(self.storage.url, compact) if process else None  # batch_process.py
-        self._next_retention = 0.0
+        self._retention_clock = RetentionClock(self.retention, engine)
         self.spool = spool
         self.spill_after_s = spill_after_s
         self.spooled = 0  # records moved to the spool (this run)
@@ -408,9 +408,9 @@ class HistoryWriter:
                     self._spill()
                 self._failing, self._failing_since = False, None
                 backoff = 0.1
-                if time.monotonic() >= self._next_retention:
-                    self._next_retention = time.monotonic() + self.retention.check_every_s
+                if self._retention_clock.due():  # by time, and by the bytes written (retention.py)
                     self.storage.apply_retention(self.retention)  # the audit trail's bound even when off
+                    self._retention_clock.done()
             except Exception as e:  # keep recording: a failed batch is logged, the rest retried
                 if self._abandoned:
                     return
