@@ -77,7 +77,7 @@ from .engines import open_storage
 from .forward import StoreAndForward
 from .lease import DEFAULT_HUB_ID, LEASE_STALE_S
 from .record_queue import QUEUE_BYTES, RecordQueue
-from .retention import Retention
+from .retention import Retention, RetentionClock
 from .spool import Spool
 from .tally import Tally
 from .writer_loop import HURRY_S, WriterLoop
@@ -125,7 +125,7 @@ class HistoryWriter:
     retention = _Of[Retention]("loop")
     spill_after_s = _Of[float]("loop")
     _stop = _Of[bool]("loop", "stopping")
-    _next_retention = _Of[float]("loop", "next_retention")
+    _retention_clock = _Of[RetentionClock]("loop", "retention_clock")
     _next_refresh = _Of[float]("_lease", "next_refresh")
     _wake = _Of[threading.Event]("queue", "wake")
     _process = _Of[BatchProcess | None]("writes", "process")
@@ -166,9 +166,10 @@ class HistoryWriter:
         self.writes = BatchWriter(storage, self.queue, self.tally, self._lease, batch_max=batch_max,
                                   process=BatchProcess(storage.url, compact) if process else None)
         self.forwarder = StoreAndForward(spool, storage, self.queue, self.tally, self.writes, self._db)
+        policy = retention or Retention()
         self.loop = WriterLoop(storage, self.queue, self.tally, self.writes, self.forwarder, self._db,
                                interval_s=interval_s, spill_after_s=spill_after_s,
-                               retention=retention or Retention())
+                               retention=policy, retention_clock=RetentionClock(policy, engine))
         self.forwarder.open()
 
     # --- Things -------------------------------------------------------------------

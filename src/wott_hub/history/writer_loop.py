@@ -28,7 +28,7 @@ from .db_errors import driver_message
 from .forward import StoreAndForward
 from .lease import Lease
 from .record_queue import RecordQueue
-from .retention import Retention
+from .retention import Retention, RetentionClock
 from .state import DatabaseState
 from .storage import StorageWriter
 from .tally import Tally
@@ -44,7 +44,7 @@ HURRY_S = 1.0
 class WriterLoop:
     def __init__(self, storage: StorageWriter, queue: RecordQueue, tally: Tally, batches: BatchWriter,
                  forward: StoreAndForward, db: DatabaseState, *, interval_s: float,
-                 spill_after_s: float, retention: Retention) -> None:
+                 spill_after_s: float, retention: Retention, retention_clock: RetentionClock) -> None:
         self.storage = storage
         self.queue = queue
         self.tally = tally
@@ -55,7 +55,7 @@ class WriterLoop:
         self.interval_s = interval_s
         self.spill_after_s = spill_after_s
         self.retention = retention
-        self.next_retention = 0.0  # time.monotonic() when retention is applied next
+        self.retention_clock = retention_clock  # when the next pass is due: by time and by bytes written
         self.stopping = False  # stop() asked: write what is queued, then end
         self.hurried = False  # hurry() asked: stop waiting for the database
         self.thread: threading.Thread | None = None
@@ -110,9 +110,9 @@ class WriterLoop:
                     fwd.spill()
                 t.failing, t.failing_since = False, None
                 backoff = 0.1
-                if time.monotonic() >= self.next_retention:
-                    self.next_retention = time.monotonic() + self.retention.check_every_s
+                if self.retention_clock.due():  # by time, and by the bytes written (retention.py)
                     self.storage.apply_retention(self.retention)  # the audit trail's bound even when off
+                    self.retention_clock.done()
             except Exception as e:  # keep recording: a failed batch is logged, the rest retried
                 if q.abandoned:
                     return
