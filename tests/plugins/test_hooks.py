@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+from wott_hub.discovery.usb import identify
 from wott_hub.examples import example_device
 from wott_hub.plugin_api import hookimpl
-from wott_hub.discovery.usb import identify
 from wott_hub.plugins import DeviceConfig, Registry, UsbMatch
 from wott_hub.tactile import DeviceDescription
 from wott_hub.td.builder import build_tactile_td
@@ -57,12 +57,14 @@ def test_hook_wott_hub_usb_devices(registry):
     assert all(m.problem() is None for m in matches)
     digit = identify("video4linux", "/sys/v0", {"DEVNAME": "/dev/video0", "ID_MODEL": "DIGIT",
                                                 "ID_VENDOR_ID": "2833", "ID_MODEL_ID": "0209",
-                                                "ID_SERIAL_SHORT": "D20001", "ID_V4L_CAPABILITIES": ":capture:"},
+                                                "ID_SERIAL_SHORT": "D20001",
+                                                "ID_V4L_CAPABILITIES": ":capture:"},
                      matches)
     assert digit is not None and digit.thing_id == "digit-D20001"
     assert digit.config() == DeviceConfig("digit-D20001", "digit", {"device": "/dev/video0"})
-    uno = identify("tty", "/sys/t0", {"DEVNAME": "/dev/ttyACM1", "ID_VENDOR_ID": "2341", "ID_MODEL_ID": "0043",
-                                      "ID_SERIAL_SHORT": "85734323430351D0E1C1"}, matches)
+    uno = identify("tty", "/sys/t0", {"DEVNAME": "/dev/ttyACM1", "ID_VENDOR_ID": "2341",
+                                      "ID_MODEL_ID": "0043", "ID_SERIAL_SHORT": "85734323430351D0E1C1"},
+                   matches)
     assert uno is not None and uno.config() == DeviceConfig(
         "flexitac-85734323430351D0E1C1", "taxel-array", {"protocol": "flexitac", "port": "/dev/ttyACM1"})
     qtpy = {"DEVNAME": "/dev/ttyACM0", "ID_VENDOR_ID": "239a", "ID_MODEL_ID": "80cb"}

@@ -92,8 +92,10 @@ class UsbEvent:
 
 def _serial(subsystem: str, props: Mapping[str, str]) -> str:
     serial = props.get("ID_SERIAL_SHORT", "")
-    if not serial and subsystem == "video4linux":  # a Mini's serial is the last word of its V4L2 name
-        words = props.get("ID_V4L_PRODUCT", "").split()
+    if not serial and subsystem == "video4linux":
+        # A Mini has no USB serial: it is the last word of its product string, which the V4L2 name
+        # (uvcvideo: "<product>: <product>", cut to 31 characters) begins with.
+        words = props.get("ID_V4L_PRODUCT", "").split(":")[0].split()
         serial = words[-1] if len(words) > 2 else ""
     return serial
 
@@ -125,7 +127,7 @@ def udev_context() -> Any:
         import pyudev
     except ImportError as e:  # not Linux (the dependency is Linux-only), or libudev is missing
         raise UdevUnavailable(f"udev is unavailable: {e}; USB devices can be listed on Linux only") from None
-    if not os.path.isdir("/sys/class") and "UMOCKDEV_DIR" not in os.environ:
+    if not os.path.isdir("/sys/class"):  # a container without sysfs: libudev would list nothing, silently
         raise UdevUnavailable("udev is unavailable: /sys is not mounted here, so no USB device can be seen")
     try:
         return pyudev.Context()
