@@ -78,11 +78,11 @@ def test_a_board_plugged_in_is_served_unplugged_is_disconnected_and_back_when_pl
         bed.plug(R.QTPY)
         port.plug(bed.pty("/dev/ttyACM0"))
         sim.start()
-        td = eventually(lambda: (r := httpx.get(f"{url}/wot/{QTPY_ID}", timeout=30)).status_code == 200 and r.json(),
-                        timeout=90, what="the QT Py's Thing served")
+        td = eventually(lambda: (r := httpx.get(f"{url}/wot/{QTPY_ID}", timeout=30)).status_code == 200
+                        and r.json(), timeout=90, what="the QT Py's Thing served")
         assert td["title"] == QTPY_ID and td["id"].endswith(f":device:{QTPY_ID}")
-        first = eventually(lambda: (h := _health(url, QTPY_ID)).get("state") == "ok" and h["frames"] > 0 and h,
-                           timeout=90, what=lambda: f"frames from the QT Py: {_health(url, QTPY_ID)}")
+        first = eventually(lambda: (h := _health(url, QTPY_ID)).get("state") == "ok" and h["frames"] > 0
+                           and h, timeout=90, what=lambda: f"frames from the QT Py: {_health(url, QTPY_ID)}")
 
         bed.unplug(R.QTPY)
         port.unplug()
