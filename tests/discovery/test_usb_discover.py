@@ -56,6 +56,15 @@ def test_a_digit_a_mini_and_an_anyskin_qt_py_are_listed_with_their_serials(testb
     assert "also xela?" in ftdi
 
 
+def test_at_80_columns_a_line_drops_what_the_device_is_never_a_value(testbed, adopt_anyskin):
+    testbed.load(R.QTPY)
+    testbed.load(R.FTDI)
+    lines = _lines(testbed.run("discover", "--usb", "--config", str(adopt_anyskin), columns=80))
+    assert lines["/dev/ttyACM0"].endswith(f"id anyskin-{R.QTPY_SERIAL}  adopt: yes")  # no room for the label
+    assert "QT Py" not in lines["/dev/ttyACM0"]
+    assert lines["/dev/ttyUSB0"].endswith("adopt: no (not in [usb] adopt)  [also xela?]")
+
+
 def test_the_json_says_what_each_device_would_be_adopted_as(testbed, adopt_anyskin):
     testbed.load(R.QTPY)
     testbed.load(R.FTDI)

@@ -70,10 +70,10 @@ class UsbTestbed:
     def env(self) -> dict[str, str]:
         return {**os.environ, "UMOCKDEV_DIR": self.dir, "COLUMNS": "200"}
 
-    def run(self, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-        """``wott-hub *args`` inside the testbed."""
-        return subprocess.run([WRAPPER, WOTT_HUB, *args], env=self.env, capture_output=True, text=True,
-                              timeout=timeout)
+    def run(self, *args: str, timeout: float = 120, columns: int = 200) -> subprocess.CompletedProcess[str]:
+        """``wott-hub *args`` inside the testbed, on a terminal ``columns`` wide."""
+        return subprocess.run([WRAPPER, WOTT_HUB, *args], env={**self.env, "COLUMNS": str(columns)},
+                              capture_output=True, text=True, timeout=timeout)
 
     def popen(self, *args: str, **kw: Any) -> subprocess.Popen[str]:
         return subprocess.Popen([WRAPPER, WOTT_HUB, *args], env=self.env, text=True, **kw)

@@ -81,11 +81,15 @@ def usb_rows(config: Path | None) -> list[dict[str, Any]]:
     return rows
 
 
-def _usb_line(row: dict[str, Any]) -> str:
+def _usb_line(row: dict[str, Any], width: int) -> str:
+    """One device, one line: what it is (the label, in brackets) only where the terminal has room for
+    it (no value is cut; --json has it all)."""
     adopted = "adopt: yes" if row["adopted"] else f"adopt: no ({row['why_not']})"
     also = f"; also {', '.join(row['also'])}?" if row["also"] else ""
-    return (f"{row['node']}  {row['family']}  {row['usb']}  serial {row['serial'] or '-'}  id {row['id']}  "
-            f"{adopted}  [{row['label']}{also}]")
+    line = (f"{row['node']}  {row['family']}  {row['usb']}  serial {row['serial'] or '-'}  id {row['id']}  "
+            f"{adopted}")
+    full = f"{line}  [{row['label']}{also}]"
+    return full if len(full) <= width else f"{line}  [also {', '.join(row['also'])}?]" if also else line
 
 
 @app.command(short_help="WoT Things and directories announced by mDNS; --usb: USB devices plugged in.")
@@ -109,7 +113,10 @@ def discover(
         elif not found:
             typer.echo("no known USB device is plugged in")
         else:
-            typer.echo("\n".join(_usb_line(r) for r in found))
+            from ._table import terminal_width
+
+            width = terminal_width()
+            typer.echo("\n".join(_usb_line(r, width) for r in found))
         return
     rows = asyncio.run(browse(timeout, interface or None, fetch))
     if as_json:
