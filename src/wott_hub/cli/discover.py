@@ -92,7 +92,7 @@ def _usb_line(row: dict[str, Any], width: int) -> str:
     return full if len(full) <= width else f"{line}  [also {', '.join(row['also'])}?]" if also else line
 
 
-@app.command(short_help="WoT Things and directories announced by mDNS; --usb: USB devices plugged in.")
+@app.command(short_help="WoT Things announced by mDNS; --usb: USB sensors.")
 def discover(
     timeout: float = typer.Option(3.0, help="Seconds to listen for announcements."),
     interface: list[str] = typer.Option(None, help="Only this interface address (repeatable), "
