@@ -29,3 +29,11 @@ def test_a_config_that_only_adopts_usb_devices_is_not_the_demo():
     cfg = HubConfig.from_dict({"usb": {"adopt": ["anyskin"]}})
     assert not cfg.demo and cfg.usb.adopt == ("anyskin",) and cfg.devices == ()
     assert HubConfig.from_dict({}).demo and not HubConfig().usb.enabled
+
+
+def test_config_check_says_which_usb_families_are_adopted(cli, tmp_path):
+    config = tmp_path / "hub.toml"
+    config.write_text('[usb]\nadopt = ["anyskin", "taxel-array"]\n')
+    res = cli("config", "check", "--config", str(config))
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == f"{config}: 0 device(s) and USB anyskin, taxel-array when plugged in: OK"

@@ -98,6 +98,8 @@ def check(
     if config is not None and cfg.demo:
         what += " (no [[device]]: the demo fleet)"
     summary = f"{what}: {len(devices)} device(s)"
+    if cfg.usb.adopt:  # docs/usb.md
+        summary += f" and USB {', '.join(cfg.usb.adopt)} when plugged in"
     if code == 0:
         typer.echo(f"{summary}: OK{' (each opened and closed)' if open_ else ''}")
     else:
