@@ -72,7 +72,7 @@ def test_hook_wott_hub_usb_devices(registry):
     assert identify("tty", "/sys/t1", qtpy, Registry(only=["anyskin"]).usb_matches()) is not None
 
 
-def test_a_usb_match_that_can_never_match_is_an_error_of_its_plugin():
+def test_a_usb_match_that_can_never_match_or_raises_is_an_error_of_its_plugin():
     class Bad:
         @staticmethod
         @hookimpl
@@ -83,11 +83,20 @@ def test_a_usb_match_that_can_never_match_is_an_error_of_its_plugin():
                     "a pad",
                     UsbMatch("pad", "tty", "a pad", vendor_id="1234", product_ids=("0001",), setting="port")]
 
+    class Bomb:
+        @staticmethod
+        @hookimpl
+        def wott_hub_usb_devices():
+            raise RuntimeError("usb exploded")
+
     reg = Registry(entry_points=False, builtins=False)
     reg.register(Bad, "bad")
+    reg.register(Bomb, "bomb")
     kept = [m for m in reg.usb_matches() if m.family == "pad"]
     assert len(kept) == 1 and kept[0].setting == "port"
     (info,) = [p for p in reg.plugins() if p.name == "bad"]
     assert info.error is not None
     for said in ("subsystem 'usb'", "'12G4' is not 4 lower-case hex digits", "no rule", "returned a str"):
         assert said in info.error, info.error
+    (bomb,) = [p for p in reg.plugins() if p.name == "bomb"]  # a plugin that raises: its own error only
+    assert bomb.error is not None and "wott_hub_usb_devices: raised RuntimeError: usb exploded" in bomb.error
