@@ -72,6 +72,7 @@ from wott_hub.plugin_api import (
     Backoff,
     DeviceDescription,
     Driver,
+    DriverError,
     Health,
     NoisyAtRest,
     RawSample,
@@ -347,12 +348,20 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             try:
                 self.estimator.set_reference(images)
             except self.reference_error as e:
-                self.set_health(Health.degraded, f"waiting for the {self.rest_subject} at rest: {e}")
+                self.set_health(Health.degraded, self._waiting_reason(e))
                 return None
             self.set_health(Health.ok)
             displacement = np.zeros((self.description.mesh.n_nodes, 3))  # the rest frame itself
         self.last_truth = truth
-        return None if displacement is None else TactileFrame(t_ns, displacement)
+        return None if displacement is None else self._frame(t_ns, displacement)
+
+    def _frame(self, t_ns: int, displacement: np.ndarray) -> TactileFrame:
+        """The frame handed to the hub (a subclass adds what it measures besides the node field)."""
+        return TactileFrame(t_ns, displacement)
+
+    def _waiting_reason(self, e: Exception) -> str:
+        """The health reason while the first frames give no reference (``e``: why this one did not)."""
+        return f"waiting for the {self.rest_subject} at rest: {e}"
 
     # -- raw signals (``ServesRawSignals``): the last frame read, as it is ---------------------------
     def raw_sample(self, name: str) -> RawSample | None:
@@ -370,11 +379,20 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         return None
 
     # -- device actions (``Tareable``, ``Recalibratable``): requested on the loop, done in the thread --
+    def _refuse_without_reference(self, action: str) -> None:
+        """A tare or recalibration needs a reference to replace: without one the action fails with the
+        reason the device has none (issue 44: it answered ``ok`` and did nothing)."""
+        if not self.estimator.has_reference:
+            why = self.health().reason or "no frame read yet"
+            raise DriverError(f"cannot {action}: no rest reference yet ({why})")
+
     def tare(self) -> str:
+        self._refuse_without_reference("tare")
         self._rest_request = "tare"
         return f"the next frame is the {self.rest_subject}'s new rest reference"
 
     def recalibrate(self) -> str:
+        self._refuse_without_reference("recalibrate")
         self._rest_request = "recalibrate"
         return f"the marker grid is found again in the next frame (the {self.rest_subject} must be at rest)"
 
