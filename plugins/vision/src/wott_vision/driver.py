@@ -45,8 +45,10 @@ not make the device impossible to remove or the hub impossible to stop. So the
 worker thread is a daemon thread of the driver's own (``_Worker``), never the event
 loop's default executor, whose threads the interpreter joins at exit; a source is
 opened outside the lock that guards the reader, so ``close()`` never waits for an
-open; and releasing a reader (``close()``, the end of ``frames()``) waits at most
-``RELEASE_TIMEOUT_S`` (a reader stuck in a read keeps the lock). Whatever is still
+open; and releasing a reader (``close()``, the end of ``frames()``) is done by the worker thread
+that opened and read it (``_release_on_worker``: OpenCV's FFmpeg capture must not outlive, or be
+released beside, its own threads) and waits at most ``RELEASE_TIMEOUT_S`` (a reader stuck in a
+read keeps the lock). Whatever is still
 stuck then is left to its daemon thread: an open that returns after ``close()``
 releases what it opened.
 
@@ -141,28 +143,6 @@ def _settle(fut: asyncio.Future[Any], value: Any, error: BaseException | None) -
         fut.set_exception(error)
     else:
         fut.set_result(value)
-
-
-async def _bounded(fn: Callable[[], None], timeout_s: float) -> bool:
-    """``fn()`` on a daemon thread of its own, waited for ``timeout_s`` at most; False if it did not end."""
-    done = asyncio.Event()
-    loop = asyncio.get_running_loop()
-
-    def run() -> None:
-        try:
-            fn()
-        finally:
-            try:
-                loop.call_soon_threadsafe(done.set)
-            except RuntimeError:  # the loop is closed
-                pass
-
-    threading.Thread(target=run, name="camera-release", daemon=True).start()
-    try:
-        await asyncio.wait_for(done.wait(), timeout_s)
-        return True
-    except TimeoutError:
-        return False
 
 
 class FrameReader(Protocol):
@@ -464,12 +444,27 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                 self.frames_yielded += 1
                 yield frame
         finally:
-            await _bounded(self._release, RELEASE_TIMEOUT_S)
-            self._worker.stop()
+            await self._release_on_worker()
 
     async def close(self) -> None:
         self._closed.set()
-        await _bounded(self._release, RELEASE_TIMEOUT_S)
+        await self._release_on_worker()
+
+    async def _release_on_worker(self) -> None:
+        """Release the source on the worker thread that opened and read it, waited for
+        ``RELEASE_TIMEOUT_S`` at most, then stop that thread.
+
+        OpenCV's FFmpeg capture owns decoder threads (FFV1 decodes on several); released from
+        another thread while its own is still alive, or not released at all before the process
+        exits, its C++ threads are destroyed joinable and the process aborts ("terminate called
+        without an active exception", exit 134: issue 44, ``config check --open`` on an FFV1 AVI).
+        Queued behind a read in progress, the release runs as soon as the read returns; a worker
+        stuck longer (a source that never answers) is left to its daemon thread as before."""
+        if self._reader is not None:
+            try:
+                await asyncio.wait_for(asyncio.shield(self._worker.call(self._release)), RELEASE_TIMEOUT_S)
+            except TimeoutError:
+                pass
         self._worker.stop()
 
 
