@@ -23,7 +23,7 @@ def documented_hooks() -> list[str]:
 
 def test_there_are_hooks_for_families_opening_demo_devices_and_claiming():
     assert set(hook_specs()) == {"wott_hub_families", "wott_hub_open_device", "wott_hub_demo_devices",
-                                 "wott_hub_claim_td"}
+                                 "wott_hub_claim_td", "wott_hub_calibrate"}
 
 
 def test_every_hook_is_documented_in_docs_plugins_md():

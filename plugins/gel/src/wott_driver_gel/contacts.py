@@ -24,7 +24,7 @@ import numpy as np
 
 from .rest import RestReference, change, smooth
 
-__all__ = ["ContactParams", "PixelContact", "find_contacts"]
+__all__ = ["ContactParams", "PixelContact", "find_contacts", "threshold"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,14 +46,19 @@ class PixelContact:
     area: int  # px, the component's
 
 
-def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams
+def threshold(ref: RestReference, p: ContactParams) -> float:
+    """The colour change that counts as contact against ``ref`` (grey levels)."""
+    return max(p.min_change, p.noise_k * ref.noise)
+
+
+def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, smoothed: bool = False
                   ) -> tuple[list[PixelContact], np.ndarray]:
-    """The contacts of ``image`` against ``ref`` (see module doc), and the change magnitude (H, W)."""
+    """The contacts of ``image`` against ``ref`` (see module doc), and the change magnitude (H, W).
+    ``smoothed``: ``image`` is already ``rest.smooth``ed by ``p.sigma_px``."""
     import cv2
 
-    mag = change(smooth(image, p.sigma_px), ref.image)
-    threshold = max(p.min_change, p.noise_k * ref.noise)
-    mask: np.ndarray = (mag > threshold).astype(np.uint8)
+    mag = change(image if smoothed else smooth(image, p.sigma_px), ref.image)
+    mask: np.ndarray = (mag > threshold(ref, p)).astype(np.uint8)
     if p.open_px > 1:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((p.open_px, p.open_px), np.uint8))
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)

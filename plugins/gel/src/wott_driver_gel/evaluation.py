@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["PressSet", "load_taxim", "write_recording"]
+__all__ = ["PressSet", "dent_depth", "load_taxim", "write_recording"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -60,3 +60,20 @@ def write_recording(folder: Path, background: np.ndarray, presses: np.ndarray, *
     for k, f in enumerate(frames):
         cv2.imwrite(str(folder / f"{k:05d}.png"), f)
     return at
+
+
+def dent_depth(depth_mm: np.ndarray, centre_px: np.ndarray, radius_px: float, scale: int
+               ) -> tuple[float, float]:
+    """(depth at the centre, depth of the dent below its contact edge), mm, of a depth map at 1/``scale``.
+
+    A ball's geometry fixes the second (``R - sqrt(R² - r²)`` for a contact of radius r): the gel around
+    the contact sinks too (an elastic solid is no bed of springs), which the first includes."""
+    h, w = depth_mm.shape
+    cx, cy = centre_px / scale
+    i, j = min(max(int(round(cy)), 0), h - 1), min(max(int(round(cx)), 0), w - 1)
+    centre = float(depth_mm[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].max())
+    t = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+    r = radius_px / scale
+    ys = np.clip(np.rint(cy + r * np.sin(t)).astype(int), 0, h - 1)
+    xs = np.clip(np.rint(cx + r * np.cos(t)).astype(int), 0, w - 1)
+    return centre, centre - float(depth_mm[ys, xs].mean())

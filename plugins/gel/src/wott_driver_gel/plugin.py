@@ -10,7 +10,7 @@ from wott_hub.plugin_api import DeviceConfig, Driver, FamilyInfo, hookimpl, nami
 
 from .settings import DIGIT, MINI, DigitSettings, MiniSettings, open_gel
 
-__all__ = ["wott_hub_families", "wott_hub_open_device"]
+__all__ = ["wott_hub_calibrate", "wott_hub_families", "wott_hub_open_device"]
 
 
 @hookimpl
@@ -28,3 +28,10 @@ def wott_hub_families() -> list[FamilyInfo]:
 def wott_hub_open_device(config: DeviceConfig) -> Driver:
     with naming_device(config):  # the registry calls this only for MINI's and DIGIT's devices
         return open_gel(config.id, config.family, dict(config.settings))
+
+
+@hookimpl
+def wott_hub_calibrate(family: str, data: str, out: str, options: dict[str, str]) -> str:
+    from .calibration import calibrate_file
+
+    return calibrate_file(family, data, out, options)

@@ -82,6 +82,9 @@ class GelSettings(BackoffSettings):
         "Smallest contact, mm^2: smaller changed patches are noise."))] = 0.5
     radius_fraction: Annotated[float, Meta(gt=0, lt=1, description=(
         "A contact's radius is that of the area changed by more than this fraction of its peak."))] = 0.3
+    calibration: Annotated[str, Meta(min_length=1, description=(
+        "A depth calibration (.npz) written by `wott-hub calibrate`: depthMap, each contact's depth and a "
+        "normal-force estimate; none: contacts only."))] | None = None
     thickness_mm: Annotated[float, Meta(gt=0, le=100, description="Gel thickness, mm.")] = 4.0
     material: Annotated[str, Meta(extra_json_schema={"enum": sorted(MATERIALS)}, description=(
         "Gel material (the force estimate's modulus)."))] = "ecoflex-00-30"
@@ -175,8 +178,8 @@ def _sensor(family: str, s: GelSettings) -> tuple[Callable[[], FrameReader], tup
     return lambda: MiniCamera(where()), MINI_SIZE, 25.0
 
 
-def describe(device_id: str, family: str, s: GelSettings, size: tuple[int, int], mm_per_px: float
-             ) -> DeviceDescription:
+def describe(device_id: str, family: str, s: GelSettings, size: tuple[int, int], mm_per_px: float,
+             depth: bool = False) -> DeviceDescription:
     w_mm, h_mm = size[0] * mm_per_px, size[1] * mm_per_px
     cols = max(2, int(round(w_mm / NODE_PITCH_MM)) + 1)
     rows = max(2, int(round(h_mm / NODE_PITCH_MM)) + 1)
@@ -190,7 +193,9 @@ def describe(device_id: str, family: str, s: GelSettings, size: tuple[int, int],
         epsilon_mm=0.05, thickness_mm=s.thickness_mm, frame=CoordinateFrame(origin_name="cornerOfView"),
         measures_contacts=True,
         description=(f"{name}: {size[0]}x{size[1]} px at {mm_per_px:.4f} mm/px ({w_mm:.1f} x {h_mm:.1f} mm); "
-                     "contacts from colour change."),
+                     "contacts from colour change" + ("; depth and a normal-force estimate (Winkler "
+                                                       "foundation, docs/gel.md) from its calibration."
+                                                       if depth else ".")),
     )
 
 
@@ -208,10 +213,25 @@ def open_gel(device_id: str, family: str, settings: Mapping[str, Any], *,
         open_source, size, fps = _sensor(family, s)
         name = f"{family} {s.serial or s.device!r}"
     mm_per_px = s.mm_per_px or default_mm_per_px(family, size[0])
-    description = describe(device_id, family, s, size, mm_per_px)
-    estimator = GelEstimator.of_settings(s, mm_per_px)
+    calibration = None
+    if s.calibration is not None:
+        from .depth import DepthCalibration
+
+        try:
+            calibration = DepthCalibration.load(s.calibration)
+        except ValueError as e:
+            raise SettingsError(f"calibration: {e}") from None
+        if abs(calibration.mm_per_px / mm_per_px - 1) > 0.01:
+            raise SettingsError(f"calibration: made at {calibration.mm_per_px:g} mm/px, this device's frames "
+                                f"are {mm_per_px:g} mm/px (calibrate at this device's frame size)")
+    description = describe(device_id, family, s, size, mm_per_px, calibration is not None)
+    estimator = GelEstimator.of_settings(s, mm_per_px, calibration)
     driver = GelDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
                        max_frames=max_frames)
     driver.raw_signals = (RawSignal("camera", "image", (size[1], size[0]), rate_hz=fps,
                                     record_hz=float(s.record_raw_hz)),)
+    if calibration is not None:
+        shape = (size[1] // calibration.scale, size[0] // calibration.scale)
+        driver.depth_shape = shape
+        driver.raw_signals += (RawSignal("depth", "grid", shape, unit="mm", rate_hz=fps, term="depthMap"),)
     return driver
