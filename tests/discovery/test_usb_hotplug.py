@@ -6,6 +6,7 @@ adopted: only ``anyskin`` is."""
 
 from __future__ import annotations
 
+import contextlib
 import re
 import subprocess
 import time
@@ -26,15 +27,11 @@ TRINKET = (R.QTPY.replace("1-2", "1-7").replace("ttyACM0", "ttyACM3").replace("M
 """ReSkin's board, a Trinket M0 (Arduino), plugged in before the hub starts."""
 
 
-@pytest.fixture(scope="module")
-def rig(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("usb-hub")
-    bed = UsbTestbed()
-    bed.load(R.UNO)
-    bed.load(TRINKET)
+@contextlib.contextmanager
+def _hub(bed: UsbTestbed, folder, config_text: str):
+    """``wott-hub run`` inside the testbed with ``config_text``: its HTTP URL, once it is ready."""
     config = folder / "hub.toml"
-    config.write_text('[hub]\nhttp_port = 0\nws_port = false\nhistory = false\n\n'
-                      '[directory]\nenabled = false\n\n[usb]\nadopt = ["anyskin"]\n')
+    config.write_text(config_text)
     log = (folder / "hub.log").open("w")
     hub = bed.popen("run", "--config", str(config), stdout=subprocess.PIPE, stderr=log, cwd=folder)
     url = ""
@@ -50,7 +47,7 @@ def rig(tmp_path_factory):
             if line.startswith("ready in "):
                 break
         assert url, f"the hub did not start: {(folder / 'hub.log').read_text()[-3000:]}"
-        yield bed, url
+        yield url
     finally:
         hub.terminate()
         try:
@@ -61,6 +58,21 @@ def rig(tmp_path_factory):
         if hub.stdout is not None:
             hub.stdout.close()
         log.close()
+
+
+CONFIG = ('[hub]\nhttp_port = 0\nws_port = false\nhistory = false\n\n'
+          '[directory]\nenabled = false\n\n[usb]\nadopt = ["anyskin"]\n')
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    bed = UsbTestbed()
+    try:
+        bed.load(R.UNO)
+        bed.load(TRINKET)
+        with _hub(bed, tmp_path_factory.mktemp("usb-hub"), CONFIG) as url:
+            yield bed, url
+    finally:
         bed.close()
 
 
@@ -114,3 +126,27 @@ def test_a_board_of_a_family_not_adopted_is_not_served(rig):
     assert httpx.get(f"{url}/wot/flexitac-{R.UNO_SERIAL}", timeout=30).status_code == 404
     devices = httpx.get(f"{url}/wot/hub/properties/health", timeout=30).json()["devices"]
     assert not any(d.startswith("flexitac") for d in devices)
+
+
+def test_with_worker_processes_an_adopted_board_runs_in_the_hub_s_process(tmp_path, eventually):
+    """``[hub] workers``: the configured devices run in a worker; a plugged-in board is opened here (the hub
+    must close it on unplug and open it on another node), its frames flow all the same."""
+    bed = UsbTestbed()
+    sim = AnySkinSimulator(BOARDS["anyskin"], rate_hz=100)
+    port = NodePort("/dev/ttyACM0")
+    sim.line.port = port
+    config = CONFIG.replace("history = false\n", "history = false\nworkers = 1\n") + (
+        '\n[[device]]\nid = "pad"\nfamily = "scene"\nshape = "flat"\nrate_hz = 30\n'
+        'step = [{ kind = "press", at = [11.25, 11.25, 4.0], start_s = 0.5, duration_s = 1.0, depth_mm = 1.0,'
+        ' radius_mm = 4.0 }]\n')
+    try:
+        with _hub(bed, tmp_path, config) as url:
+            bed.plug(R.QTPY)
+            port.plug(bed.pty("/dev/ttyACM0"))
+            sim.start()
+            eventually(lambda: (h := _health(url, QTPY_ID)).get("state") == "ok" and h["frames"] > 0,
+                       timeout=90, what=lambda: f"frames from the QT Py: {_health(url, QTPY_ID)}")
+            assert _health(url, "pad").get("state") in ("ok", "ended")  # the worker's device runs too
+    finally:
+        sim.stop()
+        bed.close()
