@@ -28,8 +28,9 @@ TRINKET = (R.QTPY.replace("1-2", "1-7").replace("ttyACM0", "ttyACM3").replace("M
 
 
 @contextlib.contextmanager
-def _hub(bed: UsbTestbed, folder, config_text: str):
-    """``wott-hub run`` inside the testbed with ``config_text``: its HTTP URL, once it is ready."""
+def _hub(bed: UsbTestbed, folder, config_text: str, banner: list[str] | None = None):
+    """``wott-hub run`` inside the testbed with ``config_text``: its HTTP URL, once it is ready (``banner``
+    gets the lines it printed)."""
     config = folder / "hub.toml"
     config.write_text(config_text)
     log = (folder / "hub.log").open("w")
@@ -42,6 +43,8 @@ def _hub(bed: UsbTestbed, folder, config_text: str):
             line = hub.stdout.readline()
             if not line:
                 break
+            if banner is not None:
+                banner.append(line.rstrip("\n"))
             if m := re.search(r"^\s+HTTP\s+(http://\S+)", line):
                 url = m.group(1)
             if line.startswith("ready in "):
@@ -62,6 +65,12 @@ def _hub(bed: UsbTestbed, folder, config_text: str):
 
 CONFIG = ('[hub]\nhttp_port = 0\nws_port = false\nhistory = false\n\n'
           '[directory]\nenabled = false\n\n[usb]\nadopt = ["anyskin"]\n')
+
+
+SCENE_PAD = ('\n[[device]]\nid = "pad"\nfamily = "scene"\nshape = "flat"\nrate_hz = 30\n'
+             'step = [{ kind = "press", at = [11.25, 11.25, 4.0], start_s = 0.5, duration_s = 1.0, '
+             'depth_mm = 1.0, radius_mm = 4.0 }]\n')
+"""A configured device beside the USB ones."""
 
 
 @pytest.fixture(scope="module")
@@ -135,10 +144,7 @@ def test_with_worker_processes_an_adopted_board_runs_in_the_hub_s_process(tmp_pa
     sim = AnySkinSimulator(BOARDS["anyskin"], rate_hz=100)
     port = NodePort("/dev/ttyACM0")
     sim.line.port = port
-    config = CONFIG.replace("history = false\n", "history = false\nworkers = 1\n") + (
-        '\n[[device]]\nid = "pad"\nfamily = "scene"\nshape = "flat"\nrate_hz = 30\n'
-        'step = [{ kind = "press", at = [11.25, 11.25, 4.0], start_s = 0.5, duration_s = 1.0, depth_mm = 1.0,'
-        ' radius_mm = 4.0 }]\n')
+    config = CONFIG.replace("history = false\n", "history = false\nworkers = 1\n") + SCENE_PAD
     try:
         with _hub(bed, tmp_path, config) as url:
             bed.plug(R.QTPY)
@@ -150,3 +156,26 @@ def test_with_worker_processes_an_adopted_board_runs_in_the_hub_s_process(tmp_pa
     finally:
         sim.stop()
         bed.close()
+
+
+def test_without_udev_the_hub_serves_its_other_devices_and_says_why(tmp_path):
+    """A machine without sysfs (umockdev's preload pointed at an empty folder): no USB device can be
+    adopted; the hub starts anyway, its configured devices served, and its banner says why."""
+    import os
+
+    from .usb_testbed import WOTT_HUB, WRAPPER
+
+    empty = tmp_path / "no-sysfs"
+    empty.mkdir()
+
+    class NoUdev:
+        def popen(self, *args: str, **kw):
+            env = {**os.environ, "UMOCKDEV_DIR": str(empty)}
+            return subprocess.Popen([WRAPPER, WOTT_HUB, *args], env=env, text=True, **kw)
+
+    config = CONFIG + SCENE_PAD
+    banner: list[str] = []
+    with _hub(NoUdev(), tmp_path, config, banner) as url:  # type: ignore[arg-type]
+        assert httpx.get(f"{url}/wot/pad", timeout=30).status_code == 200
+    (usb,) = [line for line in banner if line.startswith("  USB ")]
+    assert "adopting anyskin when plugged in; NOT: udev is unavailable: /sys is not mounted here" in usb
