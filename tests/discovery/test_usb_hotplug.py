@@ -179,3 +179,93 @@ def test_without_udev_the_hub_serves_its_other_devices_and_says_why(tmp_path):
         assert httpx.get(f"{url}/wot/pad", timeout=30).status_code == 200
     (usb,) = [line for line in banner if line.startswith("  USB ")]
     assert "adopting anyskin when plugged in; NOT: udev is unavailable: /sys is not mounted here" in usb
+
+
+CAMERA_PLUGIN = '''
+"""A test family whose devices are USB cameras: it serves the node it is given as its title, and gives
+frames only while that node is there (os.stat: under umockdev, the testbed's /dev)."""
+
+import asyncio
+import dataclasses
+import os
+import time
+
+import numpy as np
+
+from wott_hub.examples import example_device
+from wott_hub.plugin_api import Driver, FamilyInfo, TactileFrame, UsbMatch, hookimpl
+
+
+class NodeDriver(Driver):
+    def __init__(self, description, device):
+        super().__init__(description)
+        self.device = device
+
+    async def frames(self):
+        while True:
+            await asyncio.sleep(0.05)
+            os.stat(self.device)  # FileNotFoundError once the node is gone: no frame from it
+            yield TactileFrame(time.time_ns(), np.zeros((self.description.mesh.n_nodes, 3)))
+
+
+@hookimpl
+def wott_hub_families():
+    schema = {"type": "object", "additionalProperties": False, "required": ["device"],
+              "properties": {"device": {"type": "string", "pattern": "^/dev/video[0-9]+$"}}}
+    return [FamilyInfo("test-cam", "A USB camera of the tests.", schema)]
+
+
+@hookimpl
+def wott_hub_open_device(config):
+    desc = example_device("flat", config.id)
+    device = config.settings["device"]
+    return NodeDriver(dataclasses.replace(desc, title=device, family="test-cam"), device)
+
+
+@hookimpl
+def wott_hub_usb_devices():
+    return [UsbMatch("test-cam", "video4linux", "a test camera", vendor_id="f055", product_ids=("c0de",),
+                     setting="device", id_prefix="cam")]
+'''
+
+
+def _camera(port: str, index: int) -> str:
+    ids = ("f055", "c0de", "CAM42", "Tests", "Camera")
+    return R.join(R._usb(port, *ids[:3], 9, *ids[3:]),
+                  R._video(port, index, *ids, "Camera: Camera", True),  # capture
+                  R._video(port, index + 1, *ids, "Camera: Camera", False))  # metadata
+
+
+def test_a_camera_plugged_in_gets_its_capture_node_as_its_device_setting(tmp_path, eventually):
+    """The video4linux path end to end, with a family of the test's own (an installed plugin: a
+    dist-info on PYTHONPATH): plugged in, the camera is served with ``device`` = its capture node;
+    unplugged, disconnected; plugged into another port, frames again from its new node (the old one is
+    gone: a driver reading it would give none). The Thing, its TD included, stays the one first served."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "wott_test_usbcam.py").write_text(CAMERA_PLUGIN)
+    info = site / "wott_test_usbcam-0.1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: wott-test-usbcam\nVersion: 0.1.0\n")
+    (info / "entry_points.txt").write_text("[wott-hub]\nusbcam = wott_test_usbcam\n")
+    bed = UsbTestbed()
+    bed.extra_env = {"PYTHONPATH": str(site), "WOTT_HUB_PLUGINS": "usbcam"}
+    config = CONFIG.replace('adopt = ["anyskin"]', 'adopt = ["test-cam"]')
+    try:
+        with _hub(bed, tmp_path, config) as url:
+            bed.plug(_camera("1-8", 4))
+            td = eventually(lambda: (r := httpx.get(f"{url}/wot/cam-CAM42", timeout=30)).status_code == 200
+                            and r.json(), timeout=90, what="the camera's Thing served")
+            assert td["title"] == "/dev/video4"  # the capture node, not the metadata node /dev/video5
+            eventually(lambda: _health(url, "cam-CAM42").get("frames", 0) > 0, timeout=60, what="frames")
+            bed.unplug(_camera("1-8", 4))
+            eventually(lambda: _health(url, "cam-CAM42").get("state") == "disconnected", timeout=60,
+                       what=lambda: f"disconnected: {_health(url, 'cam-CAM42')}")
+            frames = _health(url, "cam-CAM42")["frames"]
+            bed.plug(_camera("1-9", 6))
+            back = eventually(lambda: (h := _health(url, "cam-CAM42")).get("state") == "ok"
+                              and h["frames"] > frames and h, timeout=90,
+                              what=lambda: f"frames from the new node: {_health(url, 'cam-CAM42')}")
+            assert back["restarts"] == 1 and back["reason"] == ""
+    finally:
+        bed.close()
