@@ -99,6 +99,9 @@ class HubConfig:
         "100 with history_durability fast, 50 with committed (docs/history.md, \"Commit interval\")."))
     history_batch_max: BatchMax = field(default=20_000, metadata=doc(
         "... or as soon as this many records wait."))
+    history_queue_mb: SpoolMegabytes = field(default=256.0, metadata=doc(
+        "The records waiting for their batch hold at most this many MB of memory (raw images weigh "
+        "~250 kB each); beyond it, while the database lags, new ones are not recorded (and counted)."))
     history_durability: Durability = field(default="fast", metadata=doc(
         "fast: subscribers get a record as soon as it is made, before its batch commits (a crash "
         "can lose what they saw); committed: only once it is in history (docs/reliability.md)."))

@@ -11,7 +11,7 @@ import sqlalchemy as sa
 
 from wott_hub.config import HubConfig
 from wott_hub.history import HistoryWriter, create_engine, database_url, upgrade
-from wott_hub.history.retention import Retention, used_bytes
+from wott_hub.history.retention import Retention, RetentionClock, used_bytes
 
 from .skin_records import busy_scene, register_device, skin_records
 
@@ -54,8 +54,8 @@ def test_old_and_excess_records_go_while_the_hub_writes_and_the_file_stops_growi
         # the configured policy, checked every 0.1 s instead of every minute (the test's only change)
         assert writer.retention == Retention(days=1, max_mb=LIMIT_MB)
         writer.retention = Retention(days=1, max_mb=LIMIT_MB, check_every_s=0.1)
-        writer._next_retention = 0.0
         engine = ht.hub._history.engine
+        writer._retention_clock = RetentionClock(writer.retention, engine)
 
         def oldest(thing: str) -> int:
             with engine.connect() as conn:

@@ -16,7 +16,7 @@ import sqlalchemy as sa
 from wott_hub.errors import Conflict
 from wott_hub.events.record import KIND_EVENT, Record
 from wott_hub.history import HistoryReader, HistoryWriter, create_engine, database_url, upgrade
-from wott_hub.history.spool import Spool
+from wott_hub.history.spool import FRAME_RECORDS, MAGIC, Spool
 
 
 def _rows(thing: str, first: int, n: int, size: int = 10) -> list[tuple[str, int, int, str, int, bytes]]:
@@ -215,3 +215,90 @@ def test_a_writer_stuck_in_the_database_is_left_behind_and_its_batch_spooled(db,
     finally:
         blocker.exec_driver_sql("ROLLBACK")
         blocker.close()
+
+
+# --- issue 48: what lies in the spool folder (items 2, 3, 5) ------------------------------------------------
+
+def _spool_of(tmp_path, n: int = 2000) -> Spool:
+    sp = Spool(tmp_path / "s", 1 << 24)
+    sp.open()
+    sp.append(_rows("a", 1, n, size=50))  # one append: frames of at most FRAME_RECORDS records
+    sp.close()
+    return sp
+
+
+def _drain(sp: Spool) -> list[int]:
+    seqs = []
+    while (head := sp.head()) is not None:
+        seqs += [r[1] for r in head[1]]
+        sp.consumed(head[0])
+    return seqs
+
+
+def test_one_flipped_byte_costs_one_frame_named_with_its_count_and_the_segment_is_kept(tmp_path):
+    _spool_of(tmp_path)
+    seg = next((tmp_path / "s").glob("*.seg"))
+    data = bytearray(seg.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    seg.write_bytes(bytes(data))
+    sp = Spool(tmp_path / "s", 1 << 24)
+    sp.open()
+    [d] = sp.damage()
+    assert 0 < d["records"] <= FRAME_RECORDS and not d["estimated"] and d["bytes"] > 0
+    assert sp.records + d["records"] == 2000  # what was read and what was lost: the whole
+    seqs = _drain(sp)
+    assert seqs == sorted(seqs) and len(seqs) == 2000 - d["records"]
+    assert not list((tmp_path / "s").glob("*.seg")) and (tmp_path / "s" / (seg.name + ".damaged")).exists()
+    assert sp.damage() == [d]  # still there: still named, until someone deletes it
+    (tmp_path / "s" / (seg.name + ".damaged")).unlink()
+    assert sp.damage() == []
+    sp.close()
+
+
+def test_a_broken_header_or_frame_header_loses_no_more_than_its_frame(tmp_path):
+    _spool_of(tmp_path)
+    seg = next((tmp_path / "s").glob("*.seg"))
+    data = bytearray(seg.read_bytes())
+    data[1] ^= 0xFF  # the segment's MAGIC
+    data[len(MAGIC) + 2] ^= 0xFF  # the first frame's header: found again by the next sync mark
+    seg.write_bytes(bytes(data))
+    sp = Spool(tmp_path / "s", 1 << 24)
+    sp.open()
+    [d] = sp.damage()
+    assert d["estimated"] and 0 < d["records"] <= 2 * FRAME_RECORDS, d
+    assert 2000 - FRAME_RECORDS <= sp.records < 2000
+    assert "header" in d["reason"]
+    sp.close()
+
+
+def test_segments_that_are_not_regular_files_are_set_aside_unread(tmp_path):
+    import os
+
+    folder = tmp_path / "s"
+    folder.mkdir()
+    os.mkfifo(folder / "0000000000.seg")  # opening it blocking would wait for a writer for ever
+    (folder / "0000000001.seg").symlink_to("/dev/zero")  # reading it would never end
+    os.mkfifo(folder / "lock")
+    sp = Spool(folder, 1 << 20)
+    sp.open()
+    assert sp.records == 0
+    kept = sorted(p.name for p in folder.iterdir())
+    assert kept == ["0000000000.seg.notfile", "0000000001.seg.notfile", "lock", "lock.notfile"], kept
+    assert [d["reason"] for d in sp.damage()] == ["not a regular file (a FIFO)",
+                                                 "not a regular file (a FIFO)",
+                                                 "not a regular file (a symbolic link)"]
+    sp.append(_rows("a", 1, 3))  # numbered after what was set aside
+    assert sorted(p.name for p in folder.glob("*.seg")) == ["0000000002.seg"]
+    sp.close()
+
+
+def test_a_segment_larger_than_the_spool_is_not_read(tmp_path):
+    folder = tmp_path / "s"
+    folder.mkdir()
+    with (folder / "0000000001.seg").open("wb") as f:
+        f.truncate(2 << 20)  # sparse: 2 MB of zeros, beyond a 1 MB spool
+    sp = Spool(folder, 1 << 20)
+    sp.open()
+    [d] = sp.damage()
+    assert "larger than the spool's bound" in d["reason"] and sp.records == 0
+    sp.close()

@@ -17,19 +17,31 @@ erase history: issue 33).
 Giving the space back: an SQLite history database is made with ``auto_vacuum =
 INCREMENTAL`` (``db.py``; migration 0006 converts an older file with one ``VACUUM``),
 so after a pass that deleted rows ``PRAGMA incremental_vacuum`` moves the last pages
-into the freed ones and truncates the file (at the next WAL checkpoint, run passively
-right after): the file shrinks to what the data uses, and a hub over ``retention_mb``
-keeps its file at about the limit while it keeps writing. The cost is proportional to
+into the freed ones and truncates the file (at the WAL checkpoint right after): the file
+shrinks to ``retention_mb`` (the free pages within it are left for the next inserts; without
+a size limit, to what the data uses), and a hub over ``retention_mb`` keeps its file at
+about the limit while it keeps writing. The cost is proportional to
 what was freed (pages moved), paid in the writer thread once per check. A file still
 without auto-vacuum (``PRAGMA auto_vacuum`` 0) reuses its freed pages instead: it stops
 growing at about the limit, without shrinking. PostgreSQL: autovacuum makes the space of
 deleted rows reusable; the table does not shrink (``VACUUM FULL`` does, offline).
+
+When a pass runs (``RetentionClock``, asked by the writer's thread between batches): every
+``check_every_s``, and with ``max_mb`` also as soon as the database has grown by ``GROWTH_SHARE``
+of it (at least ``GROWTH_MIN_BYTES``) since the last pass, at most one pass per
+``MIN_GAP_S``: with raw images recorded a minute can write many times the budget (issue 48: 797 MB
+for ``retention_mb = 30`` at 30 images/s). Growth is what the files take on disk (SQLite: the
+database and its WAL, a ``stat`` each; PostgreSQL: ``pg_total_relation_size('events')``, asked at
+most every ``PG_SIZE_EVERY_S``). After a pass that deleted, SQLite's WAL is checkpointed with
+``TRUNCATE`` (waiting ``CHECKPOINT_WAIT_MS`` at most for readers, never the connection's 10 s), so the
+file pair stays near the budget rather than the WAL keeping the size it grew to.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -41,8 +53,8 @@ from wott_hub.errors import InvalidInput
 
 from .models import AuditRow, EventRow, ThingRow
 
-__all__ = ["AUDIT_MAX_ROWS", "AUDIT_SHARE", "Retention", "apply_retention", "give_back", "trim_audit",
-           "used_bytes"]
+__all__ = ["AUDIT_MAX_ROWS", "AUDIT_SHARE", "Retention", "RetentionClock", "apply_retention", "give_back",
+           "trim_audit", "used_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +83,74 @@ class Retention:
     @property
     def active(self) -> bool:
         return bool(self.days) or bool(self.max_mb)
+
+
+GROWTH_SHARE = 0.1
+"""A pass runs once the database has grown by this share of ``max_mb`` since the last one..."""
+GROWTH_MIN_BYTES = 1 << 20
+"""...or by this many bytes, whichever is more."""
+MIN_GAP_S = 1.0
+"""Passes triggered by growth are at least this far apart (each costs a few queries)."""
+PG_SIZE_EVERY_S = 5.0
+"""PostgreSQL's table size is asked at most this often (a query, where SQLite's is a ``stat``)."""
+CHECKPOINT_WAIT_MS = 200
+"""The ``TRUNCATE`` checkpoint waits at most this long for readers, then is left for the next pass."""
+
+
+class RetentionClock:
+    """When the writer's thread runs the next retention pass: ``due()`` between batches, ``done()``
+    after the pass. Time alone (every ``check_every_s``) lets a fast writer put many times
+    ``max_mb`` on disk between two passes; the bytes the database grew by say when to run sooner."""
+
+    def __init__(self, retention: Retention, engine: Engine) -> None:
+        self.retention = retention
+        self.engine = engine
+        self._next = 0.0  # the first pass at once (the audit trail's bound, a database over its limit)
+        self._last = -1e9
+        self._after = 0  # the size right after the last pass
+        self._step = max(GROWTH_MIN_BYTES, int(GROWTH_SHARE * (retention.max_mb or 0) * 1e6))
+        url = engine.url
+        name = url.database or ""
+        self._files: tuple[str, ...] | None = None
+        if engine.dialect.name == "sqlite" and name and name != ":memory:" and not name.startswith("file:"):
+            self._files = (name, name + "-wal")
+        self._pg = engine.dialect.name == "postgresql"
+        self._size_at = -1e9
+
+    def due(self) -> bool:
+        now = time.monotonic()
+        if now >= self._next:
+            return True
+        if not self.retention.max_mb or now - self._last < MIN_GAP_S:
+            return False
+        size = self._size(now)
+        return size is not None and size - self._after >= self._step
+
+    def done(self) -> None:
+        now = time.monotonic()
+        self._last = now
+        self._next = now + self.retention.check_every_s
+        self._size_at = -1e9  # measured again now, whatever the throttle
+        self._after = self._size(now) or 0
+
+    def _size(self, now: float) -> int | None:
+        """The database's bytes on disk (None: not known, or not asked again yet)."""
+        if self._files is not None:
+            total = 0
+            for f in self._files:
+                try:
+                    total += os.stat(f).st_size
+                except OSError:
+                    pass
+            return total
+        if not self._pg or now - self._size_at < PG_SIZE_EVERY_S:
+            return None
+        self._size_at = now
+        try:
+            with self.engine.connect() as conn:
+                return int(conn.exec_driver_sql("SELECT pg_total_relation_size('events')").scalar_one())
+        except Exception:  # the database is away: the batches say so; the clock waits for its time
+            return None
 
 
 def used_bytes(conn: Connection) -> int | None:
@@ -171,21 +251,38 @@ def apply_retention(engine: Engine, r: Retention, now_ns: int | None = None) -> 
                 break
     if deleted or trimmed:
         log.info("retention deleted %d events and %d audit rows", deleted, trimmed)
-        give_back(engine)
+        give_back(engine, keep_bytes=int(r.max_mb * 1e6) if r.max_mb else None)
     return deleted
 
 
-def give_back(engine: Engine) -> int:
-    """SQLite with incremental auto-vacuum: return the free pages to the file system; returns
-    how many pages were free. Elsewhere nothing to do (0)."""
+def give_back(engine: Engine, keep_bytes: int | None = None) -> int:
+    """SQLite: return the free pages to the file system (with incremental auto-vacuum) and
+    truncate the WAL; returns how many pages were free. Elsewhere nothing to do (0).
+
+    ``keep_bytes``: the file is shrunk to this size, not below: the free pages within it are left
+    for the next inserts (a hub that keeps writing would fill them within seconds; moving the
+    last pages into them would write them all again, through the WAL)."""
     if engine.dialect.name != "sqlite":
         return 0
     with engine.connect() as conn:
-        if conn.exec_driver_sql("PRAGMA auto_vacuum").scalar() != 2:
-            return 0
-        free = conn.exec_driver_sql("PRAGMA freelist_count").scalar() or 0
-        if free:
-            raw: Any = conn.connection.driver_connection
-            # one page per step, and sqlite3's execute steps once: executescript runs it to its end
-            raw.executescript("PRAGMA incremental_vacuum; PRAGMA wal_checkpoint(PASSIVE);")
+        raw: Any = conn.connection.driver_connection
+        wait = conn.exec_driver_sql("PRAGMA busy_timeout").scalar()
+        # the WAL back to 0 bytes (the file shrinks at a checkpoint): a reader that holds it makes
+        # this wait CHECKPOINT_WAIT_MS at most, then it is left for the next pass. Before the vacuum
+        # too: the pages it moves go through the WAL, which then holds only them
+        truncate = (f"PRAGMA busy_timeout={CHECKPOINT_WAIT_MS}; PRAGMA wal_checkpoint(TRUNCATE); "
+                    f"PRAGMA busy_timeout={int(wait or 0)};")
+        raw.executescript(truncate)
+        free = 0
+        if conn.exec_driver_sql("PRAGMA auto_vacuum").scalar() == 2:
+            free = conn.exec_driver_sql("PRAGMA freelist_count").scalar() or 0
+            n = free
+            if keep_bytes is not None and free:
+                pages = conn.exec_driver_sql("PRAGMA page_count").scalar() or 0
+                page = conn.exec_driver_sql("PRAGMA page_size").scalar() or 1
+                n = min(free, max(0, pages - keep_bytes // page))
+            if n:
+                # one page per step, and sqlite3's execute steps once: executescript runs it to its end
+                raw.executescript(f"PRAGMA incremental_vacuum({int(n)});")
+                raw.executescript(truncate)
     return int(free)

@@ -88,6 +88,7 @@ class HubHistory:
                 if self._closing:
                     raise _Closed
                 writer = HistoryWriter(engine, batch_max=cfg.history_batch_max,
+                                       queue_max_bytes=int(cfg.history_queue_mb * 1e6),
                                        interval_s=cfg.commit_interval_s, retention=cfg.retention,
                                        on_commit=committed, process=cfg.history_process,
                                        spool=Spool(spool_folder(cfg, self.hub_id),
@@ -152,6 +153,7 @@ class HubHistory:
         out: dict[str, Any] = {"enabled": w is not None}
         if w is not None and engine is not None:  # both set by open()
             out.update(w.health(), database=describe(engine.url))
+            _spool_damage(out, w)
         out["exports"] = self.exports.health()
         return out
 
@@ -165,6 +167,23 @@ class HubHistory:
             return {}
         return {"written": w.written, "queued": w.queue_depth, "dropped": w.dropped,
                 "batches": w.batches, "lastBatchMs": round(w.last_batch_s * 1000, 3)}
+
+
+def _spool_damage(out: dict[str, Any], writer: HistoryWriter) -> None:
+    """What of the spool could not be read (``Spool.damage``), in ``spool.damaged``; history is
+    "degraded" while a damaged segment or a file set aside is still there (deleting it says it has
+    been seen to): records lost are never only in the log (issue 48)."""
+    sp = writer.spool
+    damage = sp.damage() if sp is not None else []
+    if not damage or not isinstance(out.get("spool"), dict):
+        return
+    out["spool"]["damaged"] = damage
+    if out.get("state") == "ok":
+        lost = sum(d["records"] for d in damage)
+        out["state"], out["reason"] = "degraded", (
+            f"the history spool could not be read whole: {lost} records lost"
+            f"{' (estimated)' if any(d['estimated'] for d in damage) else ''}; set aside: "
+            + ", ".join(Path(d["keptAs"]).name for d in damage[:4]) + (" ..." if len(damage) > 4 else ""))
 
 
 class _Closed(Exception):
