@@ -269,3 +269,30 @@ def test_a_camera_plugged_in_gets_its_capture_node_as_its_device_setting(tmp_pat
             assert back["restarts"] == 1 and back["reason"] == ""
     finally:
         bed.close()
+
+
+def test_a_digit_and_a_mini_plugged_in_are_adopted_by_the_gel_families(tmp_path, eventually):
+    """Issue 44 item 4 with the gel plugin's own families: each camera served as ``<family>-<serial>``
+    when plugged in (its driver opens the capture node when it runs: the testbed's node is no camera,
+    so no frame comes, which the health says), disconnected when unplugged."""
+    bed = UsbTestbed()
+    config = CONFIG.replace('adopt = ["anyskin"]', 'adopt = ["digit", "gelsight-mini"]')
+    digit, mini = f"digit-{R.DIGIT_SERIAL}", f"gelsight-mini-{R.MINI_SERIAL}"
+    try:
+        with _hub(bed, tmp_path, config) as url:
+            bed.plug(R.DIGIT)
+            bed.plug(R.MINI)
+            for thing in (digit, mini):
+                td = eventually(lambda t=thing: (r := httpx.get(f"{url}/wot/{t}", timeout=30)).status_code
+                                == 200 and r.json(), timeout=90, what=f"{thing} served")
+                assert td["id"].endswith(f":device:{thing}"), td["id"]
+            served = httpx.get(f"{url}/wot/hub/properties/devices", timeout=30).json()
+            assert {d["id"]: d["family"] for d in served} == {digit: "digit", mini: "gelsight-mini"}
+            bed.unplug(R.DIGIT)
+            gone = eventually(lambda: (h := _health(url, digit)).get("state") == "disconnected"
+                              and "unplugged" in h["reason"] and h, timeout=60,
+                              what=lambda: f"the DIGIT disconnected: {_health(url, digit)}")
+            assert f"serial {R.DIGIT_SERIAL} left /dev/video0" in gone["reason"]
+            assert "unplugged" not in _health(url, mini).get("reason", "")  # the Mini is still plugged in
+    finally:
+        bed.close()
