@@ -6,7 +6,9 @@ hook raises, or returns something that is not what the hook promises, gets
 the error recorded against it and is skipped for that call; the other
 plugins' results stand. One plugin cannot take down the hub. Every hook call
 goes through ``isolation.attempt``, the mechanism the hub uses for every call
-into a driver too; each distinct error is logged once (with its traceback).
+into a driver too; each distinct error is logged once (with its traceback). The checks of the
+hooks that answer with lists or claims (demo devices, foreign TDs, USB matches) are in
+``answers.py``.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import pluggy
 from wott_hub.drivers.base import Driver, DriverError
 from wott_hub.errors import SettingsError
 
-from . import hookspecs
+from . import answers, hookspecs
 from .dict_schema import with_defaults
 from .isolation import Fault, attempt
 from .loader import ENTRY_POINT_GROUP, describe_exception, discover, selected_names
@@ -313,72 +315,19 @@ class Registry:
                               "not a summary")
         return res.value
 
+    # -- the hooks whose answers are lists or claims: each checked in answers.py --
     def demo_devices(self) -> list[DeviceConfig]:
         """Each plugin's simulated demo devices, for ``wott-hub run`` without a config."""
-        hook = "wott_hub_demo_devices"
-        families = self.families()
-        out: list[DeviceConfig] = []
-        ids: set[str] = set()
-        for name, result in self._call_each(hook):
-            if not isinstance(result, list | tuple):
-                self._record_error(name, hook,
-                                   f"returned {type(result).__name__}, not a list of DeviceConfig")
-                continue
-            for cfg in result:
-                if not isinstance(cfg, DeviceConfig):
-                    self._record_error(name, hook, f"returned a {type(cfg).__name__}, not a DeviceConfig")
-                elif cfg.family not in families or families[cfg.family].plugin != name:
-                    self._record_error(name, hook, f"demo device {cfg.id!r} names family {cfg.family!r}, "
-                                                   "which this plugin does not provide")
-                elif cfg.id in ids:
-                    self._record_error(name, hook, f"demo device id {cfg.id!r} is already taken")
-                else:
-                    ids.add(cfg.id)
-                    out.append(cfg)
-        return out
+        return answers.demo_devices(self)
 
     def claim(self, td: Mapping[str, Any]) -> DeviceConfig | None:
         """The device config of the first plugin that adopts a foreign TD (``wott_hub_claim_td``), or None."""
-        hook = "wott_hub_claim_td"
-        families = self.families()
-        for name, result in self._call_each(hook, copy_args=True, td=dict(td)):
-            if result is None:
-                continue
-            if not isinstance(result, DeviceConfig):
-                self._record_error(name, hook, f"returned {type(result).__name__}, not a DeviceConfig")
-            elif result.family not in families:
-                self._record_error(name, hook, f"claimed a device for unknown family {result.family!r}")
-            else:
-                return result
-        return None
+        return answers.claim(self, td)
 
     def usb_matches(self) -> list[UsbMatch]:
-        """Every plugin's USB matches (``wott_hub_usb_devices``), in registration order (built-ins first);
-        a declaration that can never match is recorded against its plugin and left out, a repeated
-        one kept once."""
-        hook = "wott_hub_usb_devices"
-        answers: dict[str, list[Any]] = {}
-        for name, result in self._call_each(hook):
-            answers.setdefault(name, []).append(result)
-        out: list[UsbMatch] = []
-        for name in [n for n in self._records if n in answers]:
-            for result in answers[name]:
-                if not isinstance(result, list | tuple):
-                    self._record_error(name, hook,
-                                       f"returned {type(result).__name__}, not a list of UsbMatch")
-                    continue
-                self._accept_usb(name, result, out)
-        return out
-
-    def _accept_usb(self, name: str, result: list[Any] | tuple[Any, ...], out: list[UsbMatch]) -> None:
-        hook = "wott_hub_usb_devices"
-        for match in result:
-            if not isinstance(match, UsbMatch):
-                self._record_error(name, hook, f"returned a {type(match).__name__}, not a UsbMatch")
-            elif (problem := match.problem()) is not None:
-                self._record_error(name, hook, f"USB match for family {match.family!r}: {problem}")
-            elif match not in out:
-                out.append(match)
+        """Every plugin's USB matches (``wott_hub_usb_devices``), built-ins first; a declaration that can
+        never match is recorded against its plugin and left out, a repeated one kept once."""
+        return answers.usb_matches(self)
 
     # -- reporting -----------------------------------------------------------
     def failed_plugins(self) -> dict[str, str]:

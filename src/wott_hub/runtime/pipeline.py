@@ -200,10 +200,8 @@ class DevicePipeline:
         A ``health()`` that raises (or answers nonsense) makes the device
         ``degraded`` with the reason; it is logged when it starts, not on every read.
         """
-        if self.state in ("ended", "failed", "starting"):
-            return self.state, self.reason
-        if self.state == "unplugged":  # its USB device is gone (hub/usb.py): no driver runs to ask
-            return "disconnected", self.reason
+        if self.state in ("ended", "failed", "starting", "unplugged"):  # unplugged: no driver (hub.usb)
+            return "disconnected" if self.state == "unplugged" else self.state, self.reason
         out = self.guard.call("health()", _health_of, self.driver)
         if out.fault is not None:
             return "degraded", out.fault.reason
@@ -275,8 +273,7 @@ class DevicePipeline:
         self.state, self.reason = "ended", reason
 
     def unplugged(self, reason: str) -> None:
-        """Its USB device was unplugged (``hub.usb``): the driver is closed until the device comes back;
-        health says ``disconnected`` with ``reason``."""
+        """Its USB device is gone (``hub.usb``), its driver closed: health ``disconnected``, ``reason``."""
         self.state, self.reason = "unplugged", reason
 
     def failed(self, reason: str) -> None:
