@@ -38,6 +38,7 @@ class UsbTestbed:
         first = self.proc.stdout.readline()
         assert first, f"the umockdev testbed did not start (exit {self.proc.poll()})"
         self.dir = json.loads(first)["dir"]
+        self.extra_env: dict[str, str] = {}  # for the programs run inside (PYTHONPATH of a test plugin...)
 
     def _ask(self, **msg: Any) -> dict[str, Any]:
         assert self.proc.stdin is not None and self.proc.stdout is not None
@@ -68,7 +69,7 @@ class UsbTestbed:
 
     @property
     def env(self) -> dict[str, str]:
-        return {**os.environ, "UMOCKDEV_DIR": self.dir, "COLUMNS": "200"}
+        return {**os.environ, "UMOCKDEV_DIR": self.dir, "COLUMNS": "200", **self.extra_env}
 
     def run(self, *args: str, timeout: float = 120, columns: int = 200) -> subprocess.CompletedProcess[str]:
         """``wott-hub *args`` inside the testbed, on a terminal ``columns`` wide."""

@@ -142,7 +142,7 @@ class UsbAdoption:
         from wott_hub.plugins import get_registry
 
         try:
-            cfg = get_registry().validate(cfg)
+            get_registry().validate(cfg)  # checked here for its error; opened from the table as written
             driver = await open_driver(cfg)
             await self.devices.add_driver(driver, device_id=cfg.id, family=cfg.family,
                                           record=cfg.id not in self.devices.config.history_skip, config=cfg)

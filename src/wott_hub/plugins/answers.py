@@ -1,77 +1,100 @@
-"""What a plugin's hook answered, checked against what the hook promises: the accepted part and, for
-each thing refused, why (the registry records those against the plugin; no hook is called here)."""
+"""The registry's hooks whose answers are lists or claims, each answer checked before it is used.
+
+A plugin's ``wott_hub_demo_devices``, ``wott_hub_claim_td`` and ``wott_hub_usb_devices`` may return
+anything; what is not what the hook promises (a non-list, a ``DeviceConfig`` of a family it does
+not provide, a ``UsbMatch`` that can never match) is recorded against that plugin and left out,
+and the other plugins' answers stand. Called through ``Registry``'s methods of the same names,
+with the registry's own one-plugin-at-a-time calls (``_call_each``) and error record
+(``_record_error``); split from ``registry.py`` to keep each module to one job.
+"""
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Any
+from collections.abc import Iterator, Mapping
+from typing import Any, Protocol
 
 from .model import DeviceConfig, FamilyInfo, UsbMatch
-from .settings import settings_schema
-
-__all__ = ["checked_demo_devices", "checked_families", "checked_usb_matches"]
 
 
-def checked_families(result: Any) -> tuple[list[tuple[FamilyInfo, type | None]], list[str]]:
-    """(each family with its JSON Schema filled in and its settings model if it gave one, problems)."""
-    from jsonschema import Draft202012Validator
-    from jsonschema.exceptions import SchemaError
+class Registry(Protocol):
+    """What of ``registry.Registry`` these checks use (a protocol: no import of it, no cycle)."""
 
-    if not isinstance(result, list | tuple):
-        return [], [f"returned {type(result).__name__}, not a list of FamilyInfo"]
-    accepted: list[tuple[FamilyInfo, type | None]] = []
-    problems: list[str] = []
-    for fam in result:
-        if not isinstance(fam, FamilyInfo):
-            problems.append(f"returned a {type(fam).__name__}, not a FamilyInfo")
+    @property
+    def _records(self) -> Mapping[str, Any]: ...
+
+    def _call_each(self, hook: str, copy_args: bool = False, **kwargs: Any) -> Iterator[tuple[str, Any]]: ...
+
+    def _record_error(self, plugin: str, hook: str, message: str) -> None: ...
+
+    def families(self) -> dict[str, FamilyInfo]: ...
+
+__all__ = ["claim", "demo_devices", "usb_matches"]
+
+
+def demo_devices(reg: Registry) -> list[DeviceConfig]:
+    """Each plugin's simulated demo devices, for ``wott-hub run`` without a config."""
+    hook = "wott_hub_demo_devices"
+    families = reg.families()
+    out: list[DeviceConfig] = []
+    ids: set[str] = set()
+    for name, result in reg._call_each(hook):
+        if not isinstance(result, list | tuple):
+            reg._record_error(name, hook, f"returned {type(result).__name__}, not a list of DeviceConfig")
             continue
-        model = fam.schema if isinstance(fam.schema, type) else None
-        if model is not None:  # a settings model: its JSON Schema for docs and the first check
-            try:
-                fam = replace(fam, schema=settings_schema(model))
-            except Exception as e:
-                problems.append(f"family {fam.name!r}: invalid settings model: {e}")
+        for cfg in result:
+            if not isinstance(cfg, DeviceConfig):
+                reg._record_error(name, hook, f"returned a {type(cfg).__name__}, not a DeviceConfig")
+            elif cfg.family not in families or families[cfg.family].plugin != name:
+                reg._record_error(name, hook, f"demo device {cfg.id!r} names family {cfg.family!r}, "
+                                              "which this plugin does not provide")
+            elif cfg.id in ids:
+                reg._record_error(name, hook, f"demo device id {cfg.id!r} is already taken")
+            else:
+                ids.add(cfg.id)
+                out.append(cfg)
+    return out
+
+
+def claim(reg: Registry, td: Mapping[str, Any]) -> DeviceConfig | None:
+    """The device config of the first plugin that adopts a foreign TD (``wott_hub_claim_td``), or None."""
+    hook = "wott_hub_claim_td"
+    families = reg.families()
+    for name, result in reg._call_each(hook, copy_args=True, td=dict(td)):
+        if result is None:
+            continue
+        if not isinstance(result, DeviceConfig):
+            reg._record_error(name, hook, f"returned {type(result).__name__}, not a DeviceConfig")
+        elif result.family not in families:
+            reg._record_error(name, hook, f"claimed a device for unknown family {result.family!r}")
+        else:
+            return result
+    return None
+
+
+def usb_matches(reg: Registry) -> list[UsbMatch]:
+    """Every plugin's USB matches (``wott_hub_usb_devices``), in registration order (built-ins first);
+    a declaration that can never match is recorded against its plugin and left out, a repeated
+    one kept once."""
+    hook = "wott_hub_usb_devices"
+    answers: dict[str, list[Any]] = {}
+    for name, result in reg._call_each(hook):
+        answers.setdefault(name, []).append(result)
+    out: list[UsbMatch] = []
+    for name in [n for n in reg._records if n in answers]:
+        for result in answers[name]:
+            if not isinstance(result, list | tuple):
+                reg._record_error(name, hook, f"returned {type(result).__name__}, not a list of UsbMatch")
                 continue
-        try:
-            Draft202012Validator.check_schema(fam.schema)  # type: ignore[arg-type]  # a dict by now
-        except SchemaError as e:
-            problems.append(f"family {fam.name!r}: invalid settings schema: {e.message}")
-            continue
-        accepted.append((fam, model))
-    return accepted, problems
+            _accept_usb(reg, name, result, out)
+    return out
 
 
-def checked_usb_matches(result: Any) -> tuple[list[UsbMatch], list[str]]:
-    """(the matches that can match, problems)."""
-    if not isinstance(result, list | tuple):
-        return [], [f"returned {type(result).__name__}, not a list of UsbMatch"]
-    accepted: list[UsbMatch] = []
-    problems: list[str] = []
+def _accept_usb(reg: Registry, name: str, result: list[Any] | tuple[Any, ...], out: list[UsbMatch]) -> None:
+    hook = "wott_hub_usb_devices"
     for match in result:
         if not isinstance(match, UsbMatch):
-            problems.append(f"returned a {type(match).__name__}, not a UsbMatch")
+            reg._record_error(name, hook, f"returned a {type(match).__name__}, not a UsbMatch")
         elif (problem := match.problem()) is not None:
-            problems.append(f"USB match for family {match.family!r}: {problem}")
-        else:
-            accepted.append(match)
-    return accepted, problems
-
-
-def checked_demo_devices(result: Any, plugin: str, families: dict[str, FamilyInfo],
-                         taken: set[str]) -> tuple[list[DeviceConfig], list[str]]:
-    """(the demo devices of ``plugin``'s own families whose ids are not ``taken``, problems)."""
-    if not isinstance(result, list | tuple):
-        return [], [f"returned {type(result).__name__}, not a list of DeviceConfig"]
-    accepted: list[DeviceConfig] = []
-    problems: list[str] = []
-    for cfg in result:
-        if not isinstance(cfg, DeviceConfig):
-            problems.append(f"returned a {type(cfg).__name__}, not a DeviceConfig")
-        elif cfg.family not in families or families[cfg.family].plugin != plugin:
-            problems.append(f"demo device {cfg.id!r} names family {cfg.family!r}, "
-                            "which this plugin does not provide")
-        elif cfg.id in taken or any(c.id == cfg.id for c in accepted):
-            problems.append(f"demo device id {cfg.id!r} is already taken")
-        else:
-            accepted.append(cfg)
-    return accepted, problems
+            reg._record_error(name, hook, f"USB match for family {match.family!r}: {problem}")
+        elif match not in out:
+            out.append(match)

@@ -175,8 +175,11 @@ class DevicePipeline:
         return self.unavailable_json
 
     def _unavailable_changed(self, t_ns: int, sink: RecordSink) -> None:
-        """Publish ``unavailableNodes`` when the driver's ``unavailable_nodes`` changed (vision skins). Per
-        frame: an attribute read and an identity check; compared (and encoded) only when it is a new list."""
+        """Publish ``unavailableNodes`` when the driver's ``unavailable_nodes`` changed (vision skins).
+
+        Per frame: one attribute read and an identity check; the list is compared
+        (and encoded) only when the driver made a new one.
+        """
         reporter = self._reporter
         if reporter is None:
             return
@@ -197,10 +200,8 @@ class DevicePipeline:
         A ``health()`` that raises (or answers nonsense) makes the device
         ``degraded`` with the reason; it is logged when it starts, not on every read.
         """
-        if self.state in ("ended", "failed", "starting"):
-            return self.state, self.reason
-        if self.state == "unplugged":  # its USB device is gone (hub/usb.py): no driver runs to ask
-            return "disconnected", self.reason
+        if self.state in ("ended", "failed", "starting", "unplugged"):  # unplugged: no driver (hub.usb)
+            return "disconnected" if self.state == "unplugged" else self.state, self.reason
         out = self.guard.call("health()", _health_of, self.driver)
         if out.fault is not None:
             return "degraded", out.fault.reason
@@ -272,7 +273,7 @@ class DevicePipeline:
         self.state, self.reason = "ended", reason
 
     def unplugged(self, reason: str) -> None:
-        """Its USB device was unplugged (``hub.usb``): health says ``disconnected`` until it is back."""
+        """Its USB device is gone (``hub.usb``), its driver closed: health ``disconnected``, ``reason``."""
         self.state, self.reason = "unplugged", reason
 
     def failed(self, reason: str) -> None:
