@@ -196,8 +196,13 @@ class Spool:
         raise OSError(errno.EEXIST, f"{path} is not a regular file and cannot be set aside")
 
     def close(self) -> None:
+        """Never fails: a tail the disk refused was cut back when it refused (``_undo``), so nothing
+        of ours is lost here; a full disk must not turn a stop into an error (issue 48)."""
         if self._tail is not None:
-            self._tail.close()
+            try:
+                self._tail.close()
+            except OSError as e:
+                log.warning("history: closing the spool %s: %s", self.folder, e.strerror or e)
             self._tail = None
         if self._lock_file is not None:
             self._lock_file.close()  # releases the flock
