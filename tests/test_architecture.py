@@ -11,6 +11,7 @@ edge to ``x.y`` when that is a module, else to ``x``.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import wott_hub
@@ -174,3 +175,82 @@ def test_imports_go_only_to_the_same_layer_or_above():
     wrong = sorted(f"{m} (layer {_layer(m)}) imports {t} (layer {_layer(t)})"
                    for m, targets in import_graph().items() for t in targets if _layer(t) > _layer(m))
     assert not wrong, "imports against docs/architecture.md's layers:\n" + "\n".join(wrong)
+
+
+# docs/architecture.md, "The size of a class": no class of shipped code over MAX_CLASS_LINES
+# lines, but those the page names with their reason.
+MAX_CLASS_LINES = 300
+ROOT = Path(__file__).resolve().parents[1]
+_NOT_SHIPPED = {"tests", "test", ".venv", "node_modules", "__pycache__", "build", "dist"}
+
+
+def _shipped_files() -> list[Path]:
+    """Every ``.py`` of ``src/`` and of every workspace member (``[tool.uv.workspace] members``,
+    globs included: a plugin added tomorrow is in), its tests and build output aside."""
+    import tomllib
+
+    members = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["uv"]["workspace"]["members"]
+    roots = [ROOT / "src", *(p for m in members for p in sorted(ROOT.glob(m)) if p.is_dir())]
+    out = []
+    for root in roots:
+        for path in sorted(root.rglob("*.py")):
+            test = path.name.startswith("test_") or path.name == "conftest.py"
+            if _NOT_SHIPPED.isdisjoint(path.relative_to(root).parts) and not test:
+                out.append(path)
+    return out
+
+
+def class_lengths(path: Path) -> dict[str, int]:
+    """``module.Class`` (nested: ``module.Outer.Inner``) -> its lines, decorators included."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    module = path.stem
+    out: dict[str, int] = {}
+
+    def visit(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.ClassDef):
+                first = min([child.lineno, *(d.lineno for d in child.decorator_list)])
+                name = f"{prefix}.{child.name}"
+                out[name] = (child.end_lineno or child.lineno) - first + 1
+                visit(child, name)
+            else:
+                visit(child, prefix)
+
+    visit(tree, module)
+    return out
+
+
+def _allowed() -> dict[str, str]:
+    """The table of docs/architecture.md's "The size of a class": ``module.Class`` -> its reason."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    section = text.partition("## The size of a class")[2].partition("\n## ")[0]
+    rows = re.findall(r"^\|\s*`([\w.]+)`\s*\|[^|]*\|\s*(.*?)\s*\|\s*$", section, re.M)
+    return {name: why for name, why in rows}
+
+
+def test_the_class_lengths_are_measured_as_a_reader_sees_them(tmp_path):
+    path = tmp_path / "m.py"
+    path.write_text("import dataclasses\n\n@dataclasses.dataclass\nclass A:\n    x: int = 0\n\n"
+                    "    class B:\n        pass\n\n\ndef f():\n    class C:\n        y = 1\n        z = 2\n")
+    assert class_lengths(path) == {"m.A": 6, "m.A.B": 2, "m.C": 3}
+    files = {p.relative_to(ROOT).as_posix() for p in _shipped_files()}
+    assert "src/wott_hub/history/writer.py" in files and "directory/src/wott_directory/directory.py" in files
+    assert any(f.startswith("plugins/") for f in files) and any(f.startswith("client/") for f in files)
+    assert not any("/tests/" in f or f.startswith("tests/") for f in files)
+
+
+def test_no_class_of_shipped_code_is_over_300_lines_unless_the_architecture_page_says_why():
+    allowed = _allowed()
+    assert all(why for why in allowed.values()), "docs/architecture.md: each long class needs its reason"
+    seen: dict[str, int] = {}
+    for path in _shipped_files():
+        for name, lines in class_lengths(path).items():
+            seen[f"{path.relative_to(ROOT).as_posix()}: {name}"] = lines
+    long = {name: n for name, n in seen.items() if n > MAX_CLASS_LINES}
+    unexplained = sorted(f"{name} ({n} lines)" for name, n in long.items()
+                         if name.partition(": ")[2] not in allowed)
+    assert not unexplained, (f"classes over {MAX_CLASS_LINES} lines: split them into pieces of one job each, "
+                             "or say in docs/architecture.md (\"The size of a class\") why one may be "
+                             "longer:\n" + "\n".join(unexplained))
+    stale = sorted(set(allowed) - {name.partition(": ")[2] for name in long})
+    assert not stale, f"docs/architecture.md names classes no longer over {MAX_CLASS_LINES} lines: {stale}"

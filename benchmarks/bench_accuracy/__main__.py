@@ -1,13 +1,17 @@
 """``wott-hub bench accuracy``: record every family's cases, process them under each setting, score, report.
 
     uv run wott-hub bench accuracy [--families "scene pad,taxel"] [--variants] [--cost-before DIR]
-                                   [--no-write] [--json FILE]
+                                   [--realtime] [--stress N] [--no-write] [--json FILE]
 
 The tables go to the "accuracy" section of docs/benchmarks.md (what they measure is
 written beside it, by hand); ``--json`` also saves the per-family numbers (to compare
 runs); ``--variants`` adds the error-against-run-time table of the settings in
 ``variants.VARIANTS`` (each re-processes the same recordings); ``--cost-before`` the cost
-per frame against another checkout's ``tactile`` package (``cost.py``).
+per frame against another checkout's ``tactile`` package (``cost.py``). ``--realtime`` plays
+the camera skins' simulated sources as live cameras (paced, frames dropped when read late);
+``--stress N`` records beside ``stress-ng --cpu N`` (``stress.py``) and implies ``--realtime``:
+what is derived from frames that came late or not at all is scored (issue 48, item 9). Both
+write to their own section (``accuracy-stress``), not over the quiet run's tables.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from wott_hub.tactile import FrameProcessor
 from .cases import CASES
 from .families import FAMILIES, Recording, record
 from .score import CaseScore, score
+from .stress import stress
 from .tables import (
     SUMMARY_HEADER,
     actions_table,
@@ -50,10 +55,24 @@ def _families(text: str) -> list[str]:
     return names
 
 
+def _workers(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a number of CPU workers, got {text!r}") from None
+    if not 0 <= n <= 64:
+        raise argparse.ArgumentTypeError(f"between 0 and 64 CPU workers, got {n}")
+    return n
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="wott-hub bench accuracy", description=__doc__.split("\n\n")[0])
     ap.add_argument("--families", type=_families, default=list(FAMILIES), help="comma-separated, default all")
     ap.add_argument("--variants", action="store_true", help="also the error against run time of each setting")
+    ap.add_argument("--realtime", action="store_true",
+                    help="play the camera skins' sources in real time, as live cameras")
+    ap.add_argument("--stress", type=_workers, default=0, metavar="N",
+                    help="record beside stress-ng --cpu N (implies --realtime)")
     ap.add_argument("--no-write", action="store_true", help="print the tables, leave docs/benchmarks.md")
     ap.add_argument("--json", type=Path, help="write the per-family numbers here too")
     ap.add_argument("--cost-before", type=Path, metavar="DIR",
@@ -90,12 +109,14 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     t0 = time.monotonic()
     recs: list[tuple[Recording, list[FrameTruth]]] = []
-    for name in args.families:
-        family = FAMILIES[name]
-        for i, case in enumerate(CASES[family.skin]):
-            rec = record(family, case, i)
-            recs.append((rec, frame_truths(rec)))
-            print(f"recorded {name} {case.name}: {len(rec.frames)} frames", file=sys.stderr)
+    realtime = args.realtime or args.stress > 0
+    with stress(args.stress):
+        for name in args.families:
+            family = FAMILIES[name]
+            for i, case in enumerate(CASES[family.skin]):
+                rec = record(family, case, i, realtime=realtime)
+                recs.append((rec, frame_truths(rec)))
+                print(f"recorded {name} {case.name}: {len(rec.frames)} frames", file=sys.stderr)
     recorded_s = time.monotonic() - t0
     scores, refused = _score_all(recs, DEFAULT)
     per_family = {n: summary(c for c in scores if c.family == n) for n in args.families}
@@ -119,7 +140,9 @@ def main(argv: list[str] | None = None) -> None:
         parts += ["### Processing cost per frame, against the code before",
                   cost_table(load_tactile(args.cost_before))]
     frames = sum(len(r.frames) for r, _ in recs)
-    parts.append(f"{len(recs)} recordings, {frames} frames ({recorded_s:.0f} s to record); "
+    load = (f" beside `stress-ng --cpu {args.stress}`" if args.stress
+            else " (camera skins in real time)" if realtime else "")
+    parts.append(f"{len(recs)} recordings, {frames} frames ({recorded_s:.0f} s to record{load}); "
                  f"frames refused by the processor: {refused}.")
     body = "\n\n".join(parts)
     print(body)
@@ -128,6 +151,11 @@ def main(argv: list[str] | None = None) -> None:
     if not args.no_write:
         options = " --variants" if args.variants else ""
         options += " --cost-before DIR" if args.cost_before else ""
+        if realtime:
+            options += f" --stress {args.stress}" if args.stress else " --realtime"
+            write_section("accuracy-stress", "Contacts and actions on a busy machine (issue 48)", body,
+                          "uv run wott-hub bench accuracy" + options)
+            return
         write_section("accuracy", "Contacts and actions against scene truth (issue 31)", body,
                       "uv run wott-hub bench accuracy" + options)
 

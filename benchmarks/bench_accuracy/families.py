@@ -3,9 +3,12 @@
 What a user's hub would get, frame for frame: the ``scene`` family's ground truth (the
 example pad and the TacLink barrel, 120 Hz), the flat pad's and the barrel's simulated
 cameras through detection, tracking and their models (60 and 30 frames/s, scene time as
-fast as they go), and the taxel array over a real pty in real time (100 Hz), so its frames
-carry the time stamps the hub really gets from a serial link. A recording keeps the
-frames as the driver stamped them and, per frame, the scene time its truth belongs to.
+fast as they go; in real time with ``realtime=True``, as a live camera: a busy machine then
+drops frames and reads them late), and the taxel array over a real pty in real time (100 Hz),
+so its frames carry the time stamps the hub really gets from a serial link. A recording keeps
+the frames as the driver stamped them and, per frame, the scene time its truth belongs to: the
+one the driver says it showed (the camera driver's ``last_truth_t_s``, the taxel simulator's
+``scene_time`` of the frame's sequence number), never one guessed from the frame's time stamp.
 """
 
 from __future__ import annotations
@@ -47,7 +50,7 @@ class Family:
     name: str  # as in the tables
     skin: str  # which case set (cases.CASES)
     rate_hz: float
-    config: Callable[[str, Path], DeviceConfig]  # (device id, scene file) -> the device's config
+    config: Callable[[str, Path, bool], DeviceConfig]  # (device id, scene file, realtime) -> its config
 
 
 def _toml(data: dict[str, Any]) -> str:
@@ -59,18 +62,18 @@ def _toml(data: dict[str, Any]) -> str:
 
 
 def _scene_device(shape: str) -> Callable[[str, Path], DeviceConfig]:
-    return lambda did, path: DeviceConfig(did, "scene", {"shape": shape, "scene": str(path),
-                                                          "realtime": False, "rate_hz": 120.0})
+    return lambda did, path, _realtime: DeviceConfig(did, "scene", {"shape": shape, "scene": str(path),
+                                                                     "realtime": False, "rate_hz": 120.0})
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("scene pad", "pad", 120.0, _scene_device("flat")),
     Family("scene barrel", "barrel", 120.0, _scene_device("barrel")),
-    Family("camera pad", "pad", 60.0, lambda did, path: DeviceConfig(
-        did, "flat-vision", {"source": "sim", "scene": str(path), "fps": 60.0, "realtime": False})),
-    Family("camera barrel", "barrel", 30.0, lambda did, path: DeviceConfig(
-        did, "barrel-vision", {"source": "sim", "scene": str(path), "fps": 30.0, "realtime": False})),
-    Family("taxel", "taxel", 100.0, lambda did, path: DeviceConfig(
+    Family("camera pad", "pad", 60.0, lambda did, path, realtime: DeviceConfig(
+        did, "flat-vision", {"source": "sim", "scene": str(path), "fps": 60.0, "realtime": realtime})),
+    Family("camera barrel", "barrel", 30.0, lambda did, path, realtime: DeviceConfig(
+        did, "barrel-vision", {"source": "sim", "scene": str(path), "fps": 30.0, "realtime": realtime})),
+    Family("taxel", "taxel", 100.0, lambda did, path, _realtime: DeviceConfig(
         did, "taxel-array", {"simulate": True, "scene": str(path), "rate_hz": 100.0})),
 )}
 
@@ -80,15 +83,10 @@ async def _frames(driver: Any, family: Family, scene: Scene) -> tuple[list[Tacti
     frames: list[TactileFrame] = []
     times: list[float] = []
     n_due = int(scene.duration_s * family.rate_hz) + 1
-    if family.skin == "taxel":
-        clock = _SceneClock(driver.simulator)
     async for frame in driver.frames():
-        if family.skin == "taxel":
-            t = clock.scene_time(driver.last_seq)
-            if t is None:  # sent before the reader joined the line
-                continue
-        else:
-            t = (frame.t_ns - frames[0].t_ns) / 1e9 if frames else 0.0
+        t = _scene_time(driver, frame, frames)
+        if t is None:  # sent before the reader joined the line
+            continue
         frames.append(frame)
         times.append(t)
         if len(frames) >= n_due or t >= scene.duration_s:
@@ -97,35 +95,27 @@ async def _frames(driver: Any, family: Family, scene: Scene) -> tuple[list[Tacti
     return frames, times
 
 
-class _SceneClock:
-    """Scene time of each sequence number the taxel simulator sends (it may skip scene time, never
-    a sequence number): the simulator's frame k is recorded against the number it goes out with."""
-
-    def __init__(self, simulator: Any) -> None:
-        self.sim = simulator
-        self.k_of: dict[int, int] = {}
-        send = simulator._send  # noqa: SLF001 - the simulator's one seam between scene time and the line
-
-        def recording_send(k: int) -> None:
-            self.k_of[simulator._seq] = k  # noqa: SLF001 - the number this frame is about to carry
-            send(k)
-
-        simulator._send = recording_send  # noqa: SLF001
-
-    def scene_time(self, seq: int | None) -> float | None:
-        k = self.k_of.get(seq) if seq is not None else None
-        return None if k is None else k / self.sim.rate_hz
+def _scene_time(driver: Any, frame: TactileFrame, frames: list[TactileFrame]) -> float | None:
+    """The scene time of the frame ``driver`` just yielded: what its simulator says it showed."""
+    simulator = getattr(driver, "simulator", None)
+    if simulator is not None:  # the taxel board: by the frame's sequence number
+        return None if driver.last_seq is None else simulator.scene_time(driver.last_seq)
+    t_s = getattr(driver, "last_truth_t_s", None)
+    if t_s is not None:  # a camera skin's simulated source
+        return float(t_s)
+    return (frame.t_ns - frames[0].t_ns) / 1e9 if frames else 0.0  # the scene driver: scene-time stamps
 
 
-def record(family: Family, case: Case, index: int) -> Recording:
-    """Play ``case`` on ``family``'s driver (opened through the plugin registry, as the hub opens it)."""
+def record(family: Family, case: Case, index: int, *, realtime: bool = False) -> Recording:
+    """Play ``case`` on ``family``'s driver (opened through the plugin registry, as the hub opens it);
+    ``realtime``: the camera skins' sources paced as live cameras."""
     name = f"{family.skin}-{case.kind}-{case.placement}-{index}"
     data = case.scene(name)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{name}.toml"
         path.write_text(_toml(data))
         scene = Scene.load(path)
-        driver = get_registry().open_device(family.config(name, path))
+        driver = get_registry().open_device(family.config(name, path, realtime))
         frames, times = asyncio.run(asyncio.wait_for(_frames(driver, family, scene), 300))
     if not frames:
         raise RuntimeError(f"{family.name}: {case.kind}: no frame recorded")

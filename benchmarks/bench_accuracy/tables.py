@@ -55,6 +55,7 @@ def summary(scores: Iterable[CaseScore]) -> dict[str, float | int]:
         "false": sum(len(c.false_actions) for c in s),
         "static": sum(c.static for c in s), "static_slip": sum(c.static and "slip" in c.reported for c in s),
         "release_ok": sum(speed_ok(c.release_speed, c.release_truth) for c in s), "cases": len(s),
+        "actions_ok": sum(not c.missed and not c.false_actions for c in s),
         "us_median": statistics.median(us) if us else float("nan"), "us_p95": pct(us, 95),
     }
 
@@ -63,13 +64,15 @@ def summary_row(name: str, m: dict[str, float | int]) -> list[object]:
     return [name, _pct(int(m["right"]), int(m["steady"])), f"{m['loc_median']:.2f} / {m['loc_p95']:.2f}",
             _pct(int(m["spurious"]), int(m["frames"])), f"{m['phantom']} / {m['rest']}",
             f"{100 * m['force_median']:.0f} / {100 * m['force_p95']:.0f}",
-            f"{m['reported']} / {m['expected']}", m["false"], f"{m['static_slip']} / {m['static']}",
+            f"{m['reported']} / {m['expected']}", m["false"], f"{m['actions_ok']} / {m['cases']}",
+            f"{m['static_slip']} / {m['static']}",
             f"{m['release_ok']} / {m['cases']}", f"{m['us_median']:.0f} / {m['us_p95']:.0f}"]
 
 
 SUMMARY_HEADER = ["family", "right count % (steady frames)", "location median / p95 mm",
                   "spurious % of frames", "phantom (rest frames)", "force error median / p95 %",
-                  "scripted actions reported", "other actions", "slip on a static press",
+                  "scripted actions reported", "other actions", "cases with exactly their actions",
+                  "slip on a static press",
                   "release speed right", "µs/frame median / p95"]
 
 

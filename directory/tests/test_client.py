@@ -80,19 +80,21 @@ def test_registrar_keeps_tds_alive_and_they_expire_when_the_hub_dies(start_direc
     srv = start_directory(purge_interval=0.05)
 
     async def scenario():
-        hub = Registrar(DirectoryClient(srv.url, token=helpers.token), ttl=0.6)
+        # a 2 s ttl refreshed every 0.25 s: only a refresh stalled 1.75 s lets a TD lapse (a hang,
+        # not a busy machine)
+        hub = Registrar(DirectoryClient(srv.url, token=helpers.token), ttl=2.0, refresh=1 / 8)
         reader = DirectoryClient(srv.url)
         assert await hub.register(helpers.make_td("urn:hub:a"))
         assert await hub.register(helpers.make_td("urn:hub:b"))
-        assert (await reader.get("urn:hub:a"))["registration"]["ttl"] == 0.6
+        assert (await reader.get("urn:hub:a"))["registration"]["ttl"] == 2.0
         hub.start()
-        await asyncio.sleep(1.5)  # > 2 ttl: alive only because the registrar refreshes
+        await asyncio.sleep(4.5)  # > 2 ttl: alive only because the registrar refreshes
         assert {t["id"] for t in await reader.list()} >= {"urn:hub:a", "urn:hub:b"}
         await hub.unregister("urn:hub:b")
         await hub.stop(unregister=False)  # the hub "dies": no more refreshes, nothing deleted
         with pytest.raises(ProblemError):
             await reader.get("urn:hub:b")
-        deadline = asyncio.get_running_loop().time() + 5
+        deadline = asyncio.get_running_loop().time() + 60  # a hang's bound; it expires after 2 s
         while asyncio.get_running_loop().time() < deadline:
             try:
                 await reader.get("urn:hub:a")

@@ -28,6 +28,7 @@ from wott_hub.configspec import (
     suggest,
     table_of,
 )
+from wott_hub.discovery.usb_config import USB_TABLE, UsbConfig, parse_usb
 from wott_hub.mqtt.config import MQTT_TABLE, MqttConfig, parse_mqtt
 from wott_hub.network.config import (
     DIRECTORY_TABLE,
@@ -98,6 +99,9 @@ class HubConfig:
         "100 with history_durability fast, 50 with committed (docs/history.md, \"Commit interval\")."))
     history_batch_max: BatchMax = field(default=20_000, metadata=doc(
         "... or as soon as this many records wait."))
+    history_queue_mb: SpoolMegabytes = field(default=256.0, metadata=doc(
+        "The records waiting for their batch hold at most this many MB of memory (raw images weigh "
+        "~250 kB each); beyond it, while the database lags, new ones are not recorded (and counted)."))
     history_durability: Durability = field(default="fast", metadata=doc(
         "fast: subscribers get a record as soon as it is made, before its batch commits (a crash "
         "can lose what they saw); committed: only once it is in history (docs/reliability.md)."))
@@ -132,7 +136,8 @@ class HubConfig:
     mqtt: MqttConfig = field(default_factory=MqttConfig)  # [mqtt]: off unless url is set
     security: SecurityConfig = field(default_factory=SecurityConfig)  # [security]: docs/security.md
     foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)  # [foxglove]: off unless port is set
-    demo: bool = False  # no [[device]]: run the demo scene
+    usb: UsbConfig = field(default_factory=UsbConfig)  # [usb]: adopt nothing unless told
+    demo: bool = False  # no [[device]] and nothing to adopt: run the demo scene
     source: str = "<defaults>"
 
     def __post_init__(self) -> None:
@@ -172,7 +177,8 @@ class HubConfig:
         unknown = sorted(set(data) - set(_TABLES))
         for name in unknown:
             hint = suggest(name, ("device",), "[[{}]]") or suggest(name, _FILE_TABLES, "[{}]") or (
-                "; expected [hub], [[device]], [directory], [discovery], [mqtt], [security] and [foxglove]")
+                "; expected [hub], [[device]], [directory], [discovery], [mqtt], [security], [foxglove] "
+                "and [usb]")
             errors.append(f"{source}: unknown table [{name}]{hint}")
         hub = data.get("hub", {})
         if isinstance(hub, dict) and hub.get("ws_port") is False:  # documented spelling of "off"
@@ -203,7 +209,8 @@ class HubConfig:
                 errors.append(str(e))
         if errors:
             raise ConfigError("\n".join(errors))
-        return cls(devices=tuple(parsed), demo=not parsed, source=source, **tables, **values)
+        adopting = "usb" in tables and tables["usb"].enabled
+        return cls(devices=tuple(parsed), demo=not parsed and not adopting, source=source, **tables, **values)
 
     @property
     def commit_interval_s(self) -> float:
@@ -224,15 +231,15 @@ class HubConfig:
 
 
 HUB_TABLE = table_of(HubConfig, "hub", exclude=("devices", "directory", "discovery", "mqtt", "security",
-                                                "foxglove", "demo", "source"))
+                                                "foxglove", "usb", "demo", "source"))
 """The ``[hub]`` table as it is written in a file (JSON Schema: ``config_schema``)."""
 
-_FILE_TABLES = ("hub", "directory", "discovery", "mqtt", "security", "foxglove")
+_FILE_TABLES = ("hub", "directory", "discovery", "mqtt", "security", "foxglove", "usb")
 _TABLES: dict[str, tuple[Any, Any]] = {  # a file's tables: their declared model and their parser
     "hub": (None, None), "device": (None, None),
     "directory": (DIRECTORY_TABLE, parse_directory), "discovery": (DISCOVERY_TABLE, parse_discovery),
     "mqtt": (MQTT_TABLE, parse_mqtt), "security": (SECURITY_TABLE, parse_security),
-    "foxglove": (FOXGLOVE_TABLE, parse_foxglove),
+    "foxglove": (FOXGLOVE_TABLE, parse_foxglove), "usb": (USB_TABLE, parse_usb),
 }
 
 
@@ -278,14 +285,16 @@ def check_port(value: int | None, option: str = "--port") -> int | None:
 
 
 def config_schema() -> dict[str, Any]:
-    """The JSON Schema of a whole hub config file: ``[hub]``, ``[directory]``, ``[discovery]`` and
-    ``[[device]]`` (whose other keys are the family's settings: ``wott-hub plugins families``)."""
+    """The JSON Schema of a whole hub config file: ``[hub]``, ``[directory]``, ``[discovery]``,
+    ``[mqtt]``, ``[security]``, ``[foxglove]``, ``[usb]`` and ``[[device]]`` (whose other keys are the
+    family's settings: ``wott-hub plugins families``)."""
     from wott_hub.plugins.model import DeviceTable
 
     defs: dict[str, Any] = {}
     props: dict[str, Any] = {}
     for key, model in (("hub", HUB_TABLE), ("directory", DIRECTORY_TABLE), ("discovery", DISCOVERY_TABLE),
-                       ("mqtt", MQTT_TABLE), ("security", SECURITY_TABLE), ("foxglove", FOXGLOVE_TABLE)):
+                       ("mqtt", MQTT_TABLE), ("security", SECURITY_TABLE), ("foxglove", FOXGLOVE_TABLE),
+                       ("usb", USB_TABLE)):
         schema = json_schema(model)
         defs.update(schema.get("$defs", {}))
         props[key] = {"$ref": schema["$ref"]} if "$ref" in schema else schema

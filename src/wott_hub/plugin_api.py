@@ -9,7 +9,8 @@ and a test (tests/plugins/test_public_api.py) keeps it so.
 What is here, by the job it does in a plugin:
 
 - hooks: ``hookimpl``, ``DeviceConfig`` (what ``wott_hub_open_device`` is given),
-  ``FamilyInfo`` (what ``wott_hub_families`` returns), ``naming_device`` (prefixes
+  ``FamilyInfo`` (what ``wott_hub_families`` returns), ``UsbMatch`` (what
+  ``wott_hub_usb_devices`` returns), ``naming_device`` (prefixes
   a ``DriverError`` with the device and family);
 - the driver contract: ``Driver``, ``Health``, ``HealthStatus`` and the optional
   capabilities a driver may declare (``Retargetable``, ``Tareable``,
@@ -56,7 +57,7 @@ from wott_hub.drivers.base import (
 )
 from wott_hub.errors import InvalidInput, SettingsError, WottHubError
 from wott_hub.plugins.hookspecs import hookimpl
-from wott_hub.plugins.model import DeviceConfig, FamilyInfo
+from wott_hub.plugins.model import DeviceConfig, FamilyInfo, UsbMatch
 from wott_hub.plugins.naming import naming_device
 from wott_hub.plugins.settings import (
     BackoffSettings,
@@ -122,6 +123,7 @@ __all__ = [
     "SkinShape",
     "TactileFrame",
     "Tareable",
+    "UsbMatch",
     "WottHubError",
     "backoff",
     "barrel",

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 TOKEN = "fuzz-token"
-BOUND_S = 2.0
+BOUND_S = 30.0  # "still answers": a hang's bound, not a speed (a loaded machine answers late)
 FUZZ = settings(max_examples=50, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 

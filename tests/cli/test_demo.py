@@ -57,8 +57,8 @@ def test_devices_list_at_80_columns(cli, demo):
     res = cli("devices", "list", env=_env(demo))
     assert res.returncode == 0, res.stderr
     assert all(len(line) <= 80 for line in res.stdout.splitlines())
-    for did in DEMO:
-        assert re.search(rf"^{did} +\S+ +ok", res.stdout, re.M), res.stdout
+    for did in DEMO:  # its health whole: ok, or degraded while a loaded machine makes it skip frames
+        assert re.search(rf"^{did} +\S+ +(ok|degraded)\b", res.stdout, re.M), res.stdout
     rows = json.loads(cli("devices", "list", "--json", env=_env(demo)).stdout)
     assert {r["id"]: r["td"] for r in rows}.items() >= demo.devices.items()
 
@@ -119,7 +119,12 @@ def test_every_example_of_the_docs_that_runs_against_the_demo_answers(demo):
         assert res.stdout.strip() not in ("", "[]"), (doc, line, res.stdout)
 
 
-def test_history_list_of_the_demo_at_80_columns(cli, demo):
+def test_history_list_of_the_demo_at_80_columns(cli, demo, eventually):
+    def every_device_recorded() -> bool:  # its first batch written (a loaded machine writes late)
+        out = cli("history", "list", "--database", demo.database).stdout
+        return all(re.search(rf"^{did} ", out, re.M) for did in DEMO)
+
+    eventually(every_device_recorded, timeout=120, what="a row for every demo device")
     res = cli("history", "list", "--database", demo.database)
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
@@ -168,7 +173,7 @@ def test_discover_at_80_columns_keeps_whole_urls(cli, demo):
         return all(re.search(rf"^\S+\s+{re.escape(demo.devices[d])}(\s|$)", out, re.M) for d in DEMO)
 
     for _ in range(4):  # again if a loaded machine (another worker's mDNS too) missed one in the window
-        res = cli("discover", "--interface", "127.0.0.1", "--timeout", "4", timeout=120)
+        res = cli("discover", "--interface", "127.0.0.1", "--timeout", "10", timeout=120)
         assert res.returncode == 0, res.stderr
         if listed(res.stdout):
             break

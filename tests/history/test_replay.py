@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import statistics
 
 import pytest
 
@@ -22,22 +21,26 @@ def recorded(writer, make_records):
 
 
 def test_replay_reproduces_payloads_in_order_at_the_requested_speed(reader, recorded):
+    """In order, never ahead of the original timing scaled by ``speed``, and faster than the
+    original: the bounds a busy machine cannot break (it only makes a replay later) and a replay
+    that ignored ``speed`` (1 s of records in 1 s, not 0.25 s) does. How close to the scaled time
+    each record comes is a timing, not asserted here."""
     got = []
+    speed = 4.0
 
     async def main():
         loop = asyncio.get_running_loop()
-        await Replayer(reader, "d", speed=2.0, page=50).run(
+        await Replayer(reader, "d", speed=speed, page=50).run(
             lambda r: got.append((loop.time(), r.kind, r.name, r.data)))
 
     asyncio.run(main())
     assert [(k, n, d) for _, k, n, d in got] == [(r.kind, r.name, r.data) for r in recorded]
     t0 = got[0][0]
-    due = [(r.t_ns - recorded[0].t_ns) / 1e9 / 2.0 for r in recorded]
+    due = [(r.t_ns - recorded[0].t_ns) / 1e9 / speed for r in recorded]
     late = [(t - t0) - d for (t, *_), d in zip(got, due, strict=True)]
     assert min(late) > -0.003  # never ahead of the scaled original timing
-    assert statistics.median(late) < 0.05  # and on time (loose: the test machine is shared)
-    span = due[-1]
-    assert span - 0.003 <= got[-1][0] - t0 <= span + 0.5
+    original = (recorded[-1].t_ns - recorded[0].t_ns) / 1e9
+    assert got[-1][0] - t0 < original  # paced by speed: in less than the recording's own time
 
 
 def test_a_time_range_replays_only_that_range(reader, recorded):
@@ -58,15 +61,20 @@ def test_speed_zero_replays_everything_without_waiting(reader, recorded):
 def test_loop_starts_again_after_the_end(reader, recorded):
     rp = Replayer(reader, "d", speed=8.0, loop=True)  # a cycle lasts ~0.125 s
     got = []
+    n = len(recorded)
 
     async def main():
         stop = asyncio.Event()
-        asyncio.get_running_loop().call_later(0.45, stop.set)
-        await rp.run(lambda r: got.append(r.data), stop)
+
+        def take(r) -> None:  # stopped once the third cycle has begun: counted, not timed
+            got.append(r.data)
+            if len(got) > 2 * n:
+                stop.set()
+
+        await rp.run(take, stop)
 
     asyncio.run(main())
     assert rp.cycles >= 2
-    n = len(recorded)
     assert got[:n] == [r.data for r in recorded] and got[n:2 * n] == [r.data for r in recorded]
 
 

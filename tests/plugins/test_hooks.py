@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import pytest
 
+from wott_hub.discovery.usb import identify
 from wott_hub.examples import example_device
-from wott_hub.plugins import DeviceConfig, Registry
+from wott_hub.plugin_api import hookimpl
+from wott_hub.plugins import DeviceConfig, Registry, UsbMatch
 from wott_hub.tactile import DeviceDescription
 from wott_hub.td.builder import build_tactile_td
 
@@ -45,3 +47,56 @@ def test_hook_wott_hub_claim_td(registry):
     claimed = registry.claim(td)
     assert claimed is not None and claimed.family == "wot-remote" and claimed.settings["td"]["id"] == td["id"]
     assert registry.claim({"@context": "https://www.w3.org/2022/wot/td/v1.1", "title": "a lamp"}) is None
+
+
+def test_hook_wott_hub_usb_devices(registry):
+    """The built-in plugin's gel cameras and the taxel plugin's boards, each claiming the udev properties
+    of its device; a QT Py is not among them here (the anyskin plugin is not loaded)."""
+    matches = registry.usb_matches()
+    assert {m.family for m in matches} == {"digit", "gelsight-mini", "taxel-array"}
+    assert all(m.problem() is None for m in matches)
+    digit = identify("video4linux", "/sys/v0", {"DEVNAME": "/dev/video0", "ID_MODEL": "DIGIT",
+                                                "ID_VENDOR_ID": "2833", "ID_MODEL_ID": "0209",
+                                                "ID_SERIAL_SHORT": "D20001",
+                                                "ID_V4L_CAPABILITIES": ":capture:"},
+                     matches)
+    assert digit is not None and digit.thing_id == "digit-D20001"
+    assert digit.config() == DeviceConfig("digit-D20001", "digit", {"device": "/dev/video0"})
+    uno = identify("tty", "/sys/t0", {"DEVNAME": "/dev/ttyACM1", "ID_VENDOR_ID": "2341",
+                                      "ID_MODEL_ID": "0043", "ID_SERIAL_SHORT": "85734323430351D0E1C1"},
+                   matches)
+    assert uno is not None and uno.config() == DeviceConfig(
+        "flexitac-85734323430351D0E1C1", "taxel-array", {"protocol": "flexitac", "port": "/dev/ttyACM1"})
+    qtpy = {"DEVNAME": "/dev/ttyACM0", "ID_VENDOR_ID": "239a", "ID_MODEL_ID": "80cb"}
+    assert identify("tty", "/sys/t1", qtpy, matches) is None
+    assert identify("tty", "/sys/t1", qtpy, Registry(only=["anyskin"]).usb_matches()) is not None
+
+
+def test_a_usb_match_that_can_never_match_or_raises_is_an_error_of_its_plugin():
+    class Bad:
+        @staticmethod
+        @hookimpl
+        def wott_hub_usb_devices():
+            return [UsbMatch("pad", "usb", "a pad", vendor_id="1234"),
+                    UsbMatch("pad", "tty", "a pad", vendor_id="12G4"),
+                    UsbMatch("pad", "tty", "a pad"),
+                    "a pad",
+                    UsbMatch("pad", "tty", "a pad", vendor_id="1234", product_ids=("0001",), setting="port")]
+
+    class Bomb:
+        @staticmethod
+        @hookimpl
+        def wott_hub_usb_devices():
+            raise RuntimeError("usb exploded")
+
+    reg = Registry(entry_points=False, builtins=False)
+    reg.register(Bad, "bad")
+    reg.register(Bomb, "bomb")
+    kept = [m for m in reg.usb_matches() if m.family == "pad"]
+    assert len(kept) == 1 and kept[0].setting == "port"
+    (info,) = [p for p in reg.plugins() if p.name == "bad"]
+    assert info.error is not None
+    for said in ("subsystem 'usb'", "'12G4' is not 4 lower-case hex digits", "no rule", "returned a str"):
+        assert said in info.error, info.error
+    (bomb,) = [p for p in reg.plugins() if p.name == "bomb"]  # a plugin that raises: its own error only
+    assert bomb.error is not None and "wott_hub_usb_devices: raised RuntimeError: usb exploded" in bomb.error

@@ -24,7 +24,9 @@ def _ctx(cafile: str | None) -> ssl.SSLContext | None:
 def http_request(r: dict) -> dict:
     u = urlsplit(r["url"])
     path = u.path + (f"?{u.query}" if u.query else "")
-    timeout = 3 if r.get("sse") and not r.get("until") else 10
+    # generous: a loaded machine answers late; only a stream that is admitted and stays silent (the
+    # directory's events, which send their headers with the first event) waits the SSE bound out
+    timeout = 10 if r.get("sse") and not r.get("until") else 60
     if u.scheme == "https":
         conn = http.client.HTTPSConnection(u.hostname, u.port, timeout=timeout, context=_ctx(r.get("cafile")))
     else:
@@ -63,7 +65,7 @@ async def ws_request(r: dict) -> dict:
     headers = {"Authorization": f"Bearer {r['token']}"} if r.get("token") else {}
     req = HTTPRequest(r["url"], headers=headers, ssl_options=_ctx(r.get("cafile")))
     try:
-        conn = await asyncio.wait_for(websocket_connect(req), 10)
+        conn = await asyncio.wait_for(websocket_connect(req), 60)
     except HTTPClientError as e:
         return {"status": e.code}
     except Exception as e:
@@ -72,7 +74,7 @@ async def ws_request(r: dict) -> dict:
         msg = r.get("send")
         if msg is not None:
             await conn.write_message(json.dumps(msg))
-            reply = await asyncio.wait_for(conn.read_message(), 10)
+            reply = await asyncio.wait_for(conn.read_message(), 60)
             return {"status": 101, "body": reply}
         return {"status": 101}
     finally:

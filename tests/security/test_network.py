@@ -274,7 +274,7 @@ def test_audit_trail_and_no_secret_in_logs_or_history(netns, hub, tokens):
         return rows if any(r["target"] == "/wot/hub/actions/stopReplay" and r["who"] == "control-client"
                            for r in rows) else None
 
-    rows = wait_for(audited, 10)
+    rows = wait_for(audited, 60)
     assert any(r["who"] == "-" and r["status"] == 401 and r["address"] == NS_IP for r in rows)
     assert any(r["who"] == "read-client" and r["status"] == 403 and r["action"] == "POST" for r in rows)
     assert any(r["who"] == "admin-client" and r["action"] == "PUT" and r["status"] == 201 for r in rows)

@@ -1,6 +1,12 @@
 """The directory itself: TDs in memory for reads and search, SQLAlchemy for durability.
 
-All TDs live in a dict (id -> Enriched TD) loaded at start and changed only
+A short class composing pieces of one job each: storage (``store.py``: ``ThingStore`` for the
+database, ``Catalogue`` for the TDs in memory), search (``search.py``: ``SearchThread``),
+validation (``validation.py``; the registration block and each write's plan: ``registration.py``),
+lifecycle events (``events.py``: ``EventHub``), expiry (``expiry.py``) and the threads that keep
+work growing with a TD off the IOLoop (``threads.py``). What stays here is the order of a write.
+
+All TDs live in memory (``Catalogue``), loaded at start and changed only
 after the database committed the change, so reads never touch the database
 and a failed write leaves both unchanged. Writes are serialised by one lock;
 each produces at most one lifecycle event, published after the commit.
@@ -38,17 +44,10 @@ stored can make a search fail for everyone.
 from __future__ import annotations
 
 import asyncio
-import bisect
 import gc
-import heapq
-import json
 import logging
-import secrets
-import time
 import uuid
 from collections.abc import Callable, Mapping
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, TypeVar
 
@@ -56,30 +55,25 @@ from sqlalchemy.engine import Engine
 
 from .errors import BadRequest, DirectoryError, Forbidden, NotFound, ValidationFailed
 from .events import Event, EventHub
-from .mergepatch import apply_merge_patch, merge_diff
-from .registration import Enriched, enrich, iso, same_content
-from .search import SearchEngine, SearchTimedOut
+from .expiry import Expiry
+from .registration import iso, plan_write
+from .search import MAX_PENDING_SEARCHES, SearchEngine, SearchThread
 from .selftd import directory_td
 from .settings import DirectorySettings
-from .store import ThingStore
-from .validation import MAX_TD_DEPTH, check_depth, check_td, json_depth, parse_json_body
+from .store import Catalogue, ThingStore
+from .threads import WorkThread
+from .validation import MAX_TD_DEPTH, check_depth, check_td, parse_json_body, patched
 
-__all__ = ["MAX_PENDING_WRITES", "PARSE_ON_LOOP_BYTES", "Directory"]
+__all__ = ["MAX_PENDING_SEARCHES", "MAX_PENDING_WRITES", "PARSE_ON_LOOP_BYTES", "Directory", "StoreFull"]
 
 log = logging.getLogger("wott_directory")
 
 _R = TypeVar("_R")
 
-MAX_PENDING_SEARCHES = 16
-"""Searches queued for the search thread; past that a search gets 503 at once."""
 MAX_PENDING_WRITES = 16
 """Writes queued for the write thread; past that a write gets 503 at once."""
 PARSE_ON_LOOP_BYTES = 64 * 1024
 """Bodies up to this are parsed on the IOLoop (sub-millisecond); larger ones on the write thread."""
-
-
-def _json_bytes(doc: Any) -> int:
-    return len(json.dumps(doc, ensure_ascii=False, separators=(",", ":")).encode("utf-8"))
 
 
 class StoreFull(DirectoryError):
@@ -87,17 +81,6 @@ class StoreFull(DirectoryError):
 
     def __init__(self, detail: str) -> None:
         super().__init__(413, detail)
-
-
-@dataclass(frozen=True)
-class _Plan:
-    """What a write will store and publish, worked out on the write thread."""
-
-    rec: Enriched
-    size: int  # bytes of the stored TD's JSON
-    event: str | None  # "thing_created" | "thing_updated" | None (a refresh)
-    data: dict[str, Any] | None  # the event's data: the TD, or the diff with the id
-    data_size: int
 
 
 class Directory:
@@ -112,56 +95,30 @@ class Directory:
         self.settings = settings or DirectorySettings()
         self.td_security = td_security
         self.store = ThingStore(engine, create_tables=create_tables)
+        self.catalogue = Catalogue()
         self.search_engine = SearchEngine(max_length=self.settings.max_query_length)
+        self.searches = SearchThread(self.search_engine)
         self.events = EventHub(self.settings.event_retention, self.settings.sse_queue,
                                self.settings.max_event_bytes)
-        self._things: dict[str, Enriched] = {}
-        self._sizes: dict[str, int] = {}  # bytes of each stored TD's JSON
-        self.stored_bytes = 0
-        self._anonymous: set[str] = set()
-        self._own: set[str] = set()
-        self._held: set[str] = set()
-        self._unsearchable: set[str] = set()
-        self._pending_searches = 0
-        self._ids: list[str] = []
-        self._expiry: list[tuple[float, str]] = []
-        self._array: list[dict[str, Any]] | None = None
+        self.expiry = Expiry()
+        self.writes = WorkThread("wott-directory-write", MAX_PENDING_WRITES, "writes", "MAX_PENDING_WRITES")
         self._lock = asyncio.Lock()
-        self._boot = secrets.token_hex(4)
-        self._version = 0
-        self._trimmed_to = 0
         self._writes_since_freeze = 0
-        self._purge_task: asyncio.Task[None] | None = None
-        self._search_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wott-directory-search")
-        self._write_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wott-directory-write")
-        self._pending_writes = 0
         self.started = False
 
     # -- life cycle ------------------------------------------------------------
     async def start(self) -> None:
         """Create the tables if needed, load TDs and recent events, publish our own TD, start purging."""
         things, events = await self.store.open(self.settings.event_retention)
-        for t in things:
-            rec = Enriched.from_stored(t.td)
-            self._things[t.id] = rec
-            self._sizes[t.id] = t.size
-            self.stored_bytes += t.size
-            if t.anonymous:
-                self._anonymous.add(t.id)
-            if t.own:
-                self._own.add(t.id)
-            if json_depth(t.td, MAX_TD_DEPTH) > MAX_TD_DEPTH:
-                self._unsearchable.add(t.id)
-            if rec.expires is not None:
-                self._expiry.append((rec.expires.timestamp(), t.id))
-        self._ids = sorted(self._things)
-        heapq.heapify(self._expiry)
-        if self._unsearchable:
+        cat = self.catalogue
+        cat.load(things)
+        for thing_id, rec in cat.things.items():
+            self.expiry.add(thing_id, rec)
+        if cat.unsearchable:
             log.warning("%d stored TD(s) nest deeper than %d levels and are left out of searches until "
-                        "replaced: %s", len(self._unsearchable), MAX_TD_DEPTH,
-                        ", ".join(sorted(self._unsearchable)[:10]))
+                        "replaced: %s", len(cat.unsearchable), MAX_TD_DEPTH,
+                        ", ".join(sorted(cat.unsearchable)[:10]))
         self.events.restore(events)
-        self._trimmed_to = max(0, self.events.last_id - self.settings.event_retention)
         await self._trim_events()  # a smaller max_event_bytes than the last run's
         self._writes_since_freeze = 0
         if self.settings.freeze_gc:
@@ -169,20 +126,14 @@ class Directory:
         self.started = True
         await self._publish_self()
         await self.purge()
-        self._purge_task = asyncio.create_task(self._purge_loop())
+        self.expiry.start(self.purge, self.settings.purge_interval)
 
     async def stop(self) -> None:
         """End SSE streams, stop purging, release the database (the engine too if we made it)."""
         self.events.close_all()
-        if self._purge_task is not None:
-            self._purge_task.cancel()
-            try:
-                await self._purge_task
-            except asyncio.CancelledError:
-                pass
-            self._purge_task = None
-        self._search_executor.shutdown(wait=True)
-        self._write_executor.shutdown(wait=True)
+        await self.expiry.stop()
+        self.searches.shutdown()
+        self.writes.shutdown()
         await self.store.close()
         self.started = False
 
@@ -202,26 +153,31 @@ class Directory:
     async def _publish_self(self) -> None:
         td = directory_td(self.settings, td_security=self.td_security)
         async with self._lock:
-            for stale in sorted(self._own - {td["id"]}):
-                if stale in self._things:
+            for stale in sorted(self.catalogue.own - {td["id"]}):
+                if stale in self.catalogue.things:
                     await self._delete_locked(stale)
-            self._own = {td["id"]}
+            self.catalogue.own = {td["id"]}
             await self._put_locked(td["id"], td, anonymous=False)
 
     # -- reads -----------------------------------------------------------------
     def __len__(self) -> int:
-        return len(self._ids)
+        return len(self.catalogue.ids)
 
     def __contains__(self, thing_id: object) -> bool:
-        return thing_id in self._things
+        return thing_id in self.catalogue.things
 
     @property
     def etag(self) -> str:
         """Changes whenever the collection does (any create, update, refresh, delete)."""
-        return f"{self._boot}-{self._version}"
+        return self.catalogue.etag
+
+    @property
+    def stored_bytes(self) -> int:
+        """Bytes of JSON of the stored TDs together (the budget is ``max_store_bytes``)."""
+        return self.catalogue.stored_bytes
 
     def get(self, thing_id: str, retrieved: str | None = None) -> dict[str, Any]:
-        rec = self._things.get(thing_id)
+        rec = self.catalogue.things.get(thing_id)
         if rec is None:
             raise NotFound(f"No TD with id {thing_id!r}")
         return _served(rec.td, retrieved or iso(datetime.now(UTC)))
@@ -229,70 +185,32 @@ class Directory:
     def page(self, offset: int, limit: int) -> tuple[list[dict[str, Any]], int]:
         """TDs ``offset``..``offset+limit`` in ascending id (code point) order, and the total."""
         retrieved = iso(datetime.now(UTC))
-        ids = self._ids[offset:offset + limit]
-        return [_served(self._things[i].td, retrieved) for i in ids], len(self._ids)
+        return [_served(td, retrieved) for td in self.catalogue.page(offset, limit)], len(self)
 
     def snapshot(self) -> list[dict[str, Any]]:
         """The array JSONPath queries run on (shared, never mutated: treat as read-only)."""
-        if self._array is None:
-            skip = self._unsearchable
-            self._array = [self._things[i].td for i in self._ids if i not in skip]
-        return self._array
+        return self.catalogue.snapshot()
 
     def held(self, thing_id: str) -> bool:
         """Whether ``thing_id`` was written in-process, so HTTP clients may not change it."""
-        return thing_id in self._held
+        return thing_id in self.catalogue.held
 
     async def search(self, query: str) -> list[Any]:
         """Values the RFC 9535 query selects from the array of all TDs (400 on a bad query,
         400/503 naming the budget when it costs too much)."""
-        return await self._search(query, lambda results: results)
+        return await self.searches.run(query, self.snapshot, lambda results: results)
 
     async def search_json(self, query: str, dumps: Callable[[Any], bytes]) -> bytes:
         """``search`` serialised by ``dumps`` on the search thread (a large answer is not encoded
         on the IOLoop)."""
-        return await self._search(query, dumps)
-
-    async def _search(self, query: str, finish: Callable[[list[Any]], _R]) -> _R:
-        engine = self.search_engine
-        deadline = time.monotonic() + engine.time_budget_s
-        data = self.snapshot()
-        if self._pending_searches >= MAX_PENDING_SEARCHES:
-            raise DirectoryError(503, f"{MAX_PENDING_SEARCHES} searches are already waiting "
-                                      "(MAX_PENDING_SEARCHES); try again shortly", [], {"Retry-After": "1"})
-
-        def run() -> _R:  # compiling a long query takes a while too: not on the IOLoop either
-            compiled = engine.compile(query)
-            return finish(compiled.run_within(data, deadline, engine.time_budget_s, engine.max_nodes))
-
-        self._pending_searches += 1
-        try:
-            return await asyncio.wait_for(
-                asyncio.get_running_loop().run_in_executor(self._search_executor, run),
-                engine.time_budget_s + 1.0)
-        except TimeoutError:  # the thread checks its deadline itself; this only bounds the answer
-            raise SearchTimedOut(engine.time_budget_s) from None
-        finally:
-            self._pending_searches -= 1
+        return await self.searches.run(query, self.snapshot, dumps)
 
     # -- writes ----------------------------------------------------------------
-    async def _on_write_thread(self, fn: Callable[..., _R], *args: Any, remote: bool = True) -> _R:
-        """``fn(*args)`` on the write thread; for a client (``remote``), 503 at once when
-        ``MAX_PENDING_WRITES`` already wait (the embedder's own writes always wait their turn)."""
-        if remote and self._pending_writes >= MAX_PENDING_WRITES:
-            raise DirectoryError(503, f"{MAX_PENDING_WRITES} writes are already waiting "
-                                      "(MAX_PENDING_WRITES); try again shortly", [], {"Retry-After": "1"})
-        self._pending_writes += 1
-        try:
-            return await asyncio.get_running_loop().run_in_executor(self._write_executor, fn, *args)
-        finally:
-            self._pending_writes -= 1
-
     async def parse_body(self, body: bytes) -> Any:
         """A request body as JSON (400 naming where it broke); a large one parsed on the write thread."""
         if len(body) <= PARSE_ON_LOOP_BYTES:
             return parse_json_body(body)
-        return await self._on_write_thread(parse_json_body, body)
+        return await self.writes.run(parse_json_body, body)
 
     async def put(self, thing_id: str, td: Any, *, remote: bool = False) -> bool:
         """Create or replace the TD ``thing_id`` (PUT); True if it was created. ``remote``: an HTTP
@@ -307,13 +225,13 @@ class Directory:
                                      f"{td['id']!r} does not match the id in the URL ({thing_id!r})"}])
         self._check_not_own(thing_id)
         self._check_not_held(thing_id, remote)
-        await self._on_write_thread(check_td, td, remote=remote)
+        await self.writes.run(check_td, td, bounded=remote)
         async with self._lock:
             self._check_not_held(thing_id, remote)  # the embedder may have put it meanwhile
-            anonymous = thing_id in self._anonymous
+            anonymous = thing_id in self.catalogue.anonymous
             created = await self._put_locked(thing_id, td, anonymous=anonymous, remote=remote)
             if not remote:
-                self._held.add(thing_id)
+                self.catalogue.held.add(thing_id)
             return created
 
     async def create_anonymous(self, td: Any, *, remote: bool = False) -> str:
@@ -332,11 +250,11 @@ class Directory:
                 with_id["id"] = thing_id
         if "id" not in with_id:
             with_id = {"id": thing_id, **with_id}
-        await self._on_write_thread(check_td, with_id, remote=remote)
+        await self.writes.run(check_td, with_id, bounded=remote)
         async with self._lock:
             await self._put_locked(thing_id, with_id, anonymous=True, remote=remote)
             if not remote:
-                self._held.add(thing_id)
+                self.catalogue.held.add(thing_id)
         return thing_id
 
     async def patch(self, thing_id: str, patch: Any, *, remote: bool = False) -> None:
@@ -348,30 +266,19 @@ class Directory:
         check_depth(patch, "The merge patch")  # applying it recurses as deep as it nests
         self._check_not_own(thing_id)
         async with self._lock:
-            prev = self._things.get(thing_id)
+            prev = self.catalogue.things.get(thing_id)
             if prev is None:
                 raise NotFound(f"No TD with id {thing_id!r}")
             self._check_not_held(thing_id, remote)
-            candidate = await self._on_write_thread(self._patched, thing_id, prev.td, patch, remote=remote)
-            await self._put_locked(thing_id, candidate, anonymous=thing_id in self._anonymous, remote=remote)
-
-    def _patched(self, thing_id: str, td: dict[str, Any], patch: dict[str, Any]) -> dict[str, Any]:
-        """The patched TD, checked (on the write thread)."""
-        candidate = apply_merge_patch(td, patch)
-        if candidate.get("id") != thing_id:
-            raise ValidationFailed([{"field": "$.id",
-                                     "description": "the id of a TD cannot be changed or removed"}])
-        size = _json_bytes({k: v for k, v in candidate.items() if k != "registration"})
-        limit = self.settings.max_body_bytes
-        if size > limit:
-            raise DirectoryError(413, f"The patched TD would be {size} bytes, more than the {limit} a TD may "
-                                      "have (max_body_bytes)")
-        return check_td(candidate)
+            candidate = await self.writes.run(patched, thing_id, prev.td, patch, self.settings.max_body_bytes,
+                                              bounded=remote)
+            await self._put_locked(thing_id, candidate, anonymous=thing_id in self.catalogue.anonymous,
+                                   remote=remote)
 
     async def delete(self, thing_id: str, *, remote: bool = False) -> None:
         self._check_not_own(thing_id)
         async with self._lock:
-            if thing_id not in self._things:
+            if thing_id not in self.catalogue.things:
                 raise NotFound(f"No TD with id {thing_id!r}")
             self._check_not_held(thing_id, remote)
             await self._delete_locked(thing_id)
@@ -381,51 +288,26 @@ class Directory:
             raise Forbidden("The directory's own TD is managed by the directory")
 
     def _check_not_held(self, thing_id: str, remote: bool) -> None:
-        if remote and thing_id in self._held:
+        if remote and thing_id in self.catalogue.held:
             raise Forbidden(f"The TD {thing_id!r} is registered by the application serving this directory "
                             "(the hub) and only it can change or delete it")
 
-    @staticmethod
-    def _plan(thing_id: str, td: dict[str, Any], prev: Enriched | None, now: datetime) -> _Plan:
-        """The enriched TD, its size and its event (on the write thread: all of it grows with the TD)."""
-        rec = enrich(td, now, prev)
-        if prev is not None and same_content(prev.td, rec.td):
-            reg = {**rec.td["registration"], "modified": iso(prev.modified)}
-            rec = Enriched({**rec.td, "registration": reg}, prev.created, prev.modified, rec.expires)
-            return _Plan(rec, _json_bytes(rec.td), None, None, 0)
-        size = _json_bytes(rec.td)
-        if prev is None:
-            return _Plan(rec, size, "thing_created", rec.td, size)
-        diff = {"id": thing_id, **merge_diff(prev.td, rec.td)}
-        return _Plan(rec, size, "thing_updated", diff, _json_bytes(diff))
-
     async def _put_locked(self, thing_id: str, td: dict[str, Any], anonymous: bool,
                           remote: bool = False) -> bool:
-        prev = self._things.get(thing_id)
-        plan = await self._on_write_thread(self._plan, thing_id, td, prev, datetime.now(UTC), remote=False)
-        rec = plan.rec
-        old_size = self._sizes.get(thing_id, 0)
+        cat = self.catalogue
+        prev = cat.things.get(thing_id)
+        plan = await self.writes.run(plan_write, thing_id, td, prev, datetime.now(UTC), bounded=False)
+        old_size = cat.sizes.get(thing_id, 0)
         budget = self.settings.max_store_bytes
-        if remote and plan.size > old_size and self.stored_bytes - old_size + plan.size > budget:
-            raise StoreFull(f"The directory's storage budget is full: {self.stored_bytes} of {budget} bytes "
+        if remote and plan.size > old_size and cat.stored_bytes - old_size + plan.size > budget:
+            raise StoreFull(f"The directory's storage budget is full: {cat.stored_bytes} of {budget} bytes "
                             f"of TDs stored (max_store_bytes), this TD is {plan.size}; delete TDs first")
         event = (Event(self.events.next_id(), plan.event, thing_id, plan.data, plan.data_size)
                  if plan.event is not None else None)
-        row = {"id": thing_id, "td": rec.td, "anonymous": anonymous, "own": thing_id in self._own,
-               "created": rec.created,
-               "modified": rec.modified, "expires": rec.expires}
-        await self.store.write(upserts=[row], events=[event] if event else [],
-                               new_ids=[] if prev else [thing_id])
-        self._things[thing_id] = rec
-        self._sizes[thing_id] = plan.size
-        self.stored_bytes += plan.size - old_size
-        self._unsearchable.discard(thing_id)  # a TD written now passed the depth check
-        if prev is None:
-            bisect.insort(self._ids, thing_id)
-            if anonymous:
-                self._anonymous.add(thing_id)
-        if rec.expires is not None:
-            heapq.heappush(self._expiry, (rec.expires.timestamp(), thing_id))
+        await self.store.write(upserts=[cat.row(thing_id, plan.rec, anonymous)],
+                               events=[event] if event else [], new_ids=[] if prev else [thing_id])
+        cat.stored(thing_id, plan.rec, plan.size, anonymous)
+        self.expiry.add(thing_id, plan.rec)
         self._changed()
         if event is not None:
             self.events.publish(event)
@@ -434,21 +316,13 @@ class Directory:
     async def _delete_locked(self, thing_id: str, reason: str = "deleted") -> None:
         event = Event(self.events.next_id(), "thing_deleted", thing_id, None)
         await self.store.write(deletes=[thing_id], events=[event])
-        del self._things[thing_id]
-        self.stored_bytes -= self._sizes.pop(thing_id, 0)
-        self._anonymous.discard(thing_id)
-        self._held.discard(thing_id)
-        self._unsearchable.discard(thing_id)
-        i = bisect.bisect_left(self._ids, thing_id)
-        del self._ids[i]
+        self.catalogue.removed(thing_id)
         self._changed()
         self.events.publish(event)
         log.debug("TD %s %s", thing_id, reason)
 
     def _changed(self) -> None:
-        self._version += 1
-        self._array = None
-        if self.settings.freeze_gc:
+        if self.settings.freeze_gc:  # the TDs are long-lived: out of the collector's way
             self._writes_since_freeze += 1
             if self._writes_since_freeze >= self.settings.freeze_every:
                 gc.freeze()
@@ -458,39 +332,24 @@ class Directory:
     async def purge(self) -> list[str]:
         """Delete the TDs past their ``expires`` now; returns their ids."""
         now = datetime.now(UTC).timestamp()
-        if not self._expiry or self._expiry[0][0] > now:
-            await self._trim_events()
-            return []
         purged = []
-        async with self._lock:
-            while self._expiry and self._expiry[0][0] <= now:
-                stamp, thing_id = heapq.heappop(self._expiry)
-                rec = self._things.get(thing_id)
-                if rec is None or rec.expires is None or rec.expires.timestamp() != stamp:
-                    continue  # deleted or re-registered since: a stale heap entry
-                await self._delete_locked(thing_id, "expired")
-                purged.append(thing_id)
+        if self.expiry.due(now):
+            async with self._lock:
+                for thing_id in self.expiry.pop_due(now, self.catalogue.things.get):
+                    await self._delete_locked(thing_id, "expired")
+                    purged.append(thing_id)
         await self._trim_events()
         return purged
 
     async def _trim_events(self) -> None:
         """The database keeps the events the replay log keeps (count and bytes), no older one."""
-        keep_after = max(self.events.last_id - self.settings.event_retention, self.events.first_kept - 1)
-        if keep_after > self._trimmed_to:
+        keep_after = self.events.to_trim()
+        if keep_after is not None:
             await self.store.trim_events(keep_after)
-            self._trimmed_to = keep_after
-
-    async def _purge_loop(self) -> None:
-        while True:
-            await asyncio.sleep(self.settings.purge_interval)
-            try:
-                await self.purge()
-            except Exception:  # a database hiccup must not end purging for good
-                log.exception("purging expired TDs failed; retrying in %.1f s", self.settings.purge_interval)
+            self.events.trimmed_to = keep_after
 
 
 def _served(td: dict[str, Any], retrieved: str) -> dict[str, Any]:
     out = dict(td)
     out["registration"] = {**td.get("registration", {}), "retrieved": retrieved}
     return out
-

@@ -88,12 +88,20 @@ class EventHub:
         self.subscribers: set[Subscription] = set()
         self.queue_size = queue_size
         self.last_id = 0
+        self.trimmed_to = 0  # storage holds no event of this id or older
 
     def restore(self, events: Iterable[Event]) -> None:
-        """Events loaded from storage at start, oldest first."""
+        """Events loaded from storage at start, oldest first (it loads ``retention`` at most)."""
         for ev in events:
             self._log(ev)
             self.last_id = max(self.last_id, ev.id)
+        self.trimmed_to = max(0, self.last_id - self.retention)
+
+    def to_trim(self) -> int | None:
+        """The id up to which storage may now delete events: it keeps what this log keeps (count and
+        bytes), no older one; None when nothing more may go. Tell ``trimmed_to`` once it did."""
+        keep_after = max(self.last_id - self.retention, self.first_kept - 1)
+        return keep_after if keep_after > self.trimmed_to else None
 
     def next_id(self) -> int:
         self.last_id += 1

@@ -9,14 +9,16 @@ serves carries the Discovery context URI, as Enriched TDs must.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from .errors import ValidationFailed
-from .mergepatch import same_json
-from .validation import MAX_TTL_S, parse_rfc3339
+from .mergepatch import merge_diff, same_json
+from .validation import MAX_TTL_S, json_bytes, parse_rfc3339
 
-__all__ = ["DISCOVERY_CONTEXT", "Enriched", "enrich", "iso", "same_content", "with_context"]
+__all__ = ["DISCOVERY_CONTEXT", "Enriched", "WritePlan", "enrich", "iso", "plan_write", "same_content",
+           "with_context"]
 
 DISCOVERY_CONTEXT = "https://www.w3.org/2022/wot/discovery"
 
@@ -100,3 +102,29 @@ def same_content(a: dict[str, Any], b: dict[str, Any]) -> bool:
         elif not same_json(value, b[key]):
             return False
     return True
+
+
+@dataclass(frozen=True)
+class WritePlan:
+    """What a write will store and publish, worked out on the write thread."""
+
+    rec: Enriched
+    size: int  # bytes of the stored TD's JSON
+    event: str | None  # "thing_created" | "thing_updated" | None (a refresh)
+    data: dict[str, Any] | None  # the event's data: the TD, or the diff with the id
+    data_size: int
+
+
+def plan_write(thing_id: str, td: dict[str, Any], prev: Enriched | None, now: datetime) -> WritePlan:
+    """The enriched TD, its size and its event (on the write thread: all of it grows with the TD). A
+    write that changes nothing but the registration times (a refresh) keeps ``modified``, no event."""
+    rec = enrich(td, now, prev)
+    if prev is not None and same_content(prev.td, rec.td):
+        reg = {**rec.td["registration"], "modified": iso(prev.modified)}
+        rec = Enriched({**rec.td, "registration": reg}, prev.created, prev.modified, rec.expires)
+        return WritePlan(rec, json_bytes(rec.td), None, None, 0)
+    size = json_bytes(rec.td)
+    if prev is None:
+        return WritePlan(rec, size, "thing_created", rec.td, size)
+    diff = {"id": thing_id, **merge_diff(prev.td, rec.td)}
+    return WritePlan(rec, size, "thing_updated", diff, json_bytes(diff))

@@ -43,7 +43,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import re2
 from jsonpath import JSONPathEnvironment, JSONPathError, JSONPathMatch
@@ -64,9 +64,16 @@ from jsonpath.segments import JSONPathChildSegment
 from jsonpath.selectors import Filter, IndexSelector, NameSelector
 
 from .errors import BadRequest, DirectoryError
+from .threads import WorkThread
 from .validation import MAX_TD_DEPTH
 
-__all__ = ["CompiledQuery", "QueryTooExpensive", "SearchEngine", "SearchTimedOut"]
+__all__ = ["MAX_PENDING_SEARCHES", "CompiledQuery", "QueryTooExpensive", "SearchEngine", "SearchThread",
+           "SearchTimedOut"]
+
+_R = TypeVar("_R")
+
+MAX_PENDING_SEARCHES = 16
+"""Searches queued for the search thread; past that a search gets 503 at once."""
 
 MAX_FILTER_NESTING = 8
 """Filters inside filters (``$[?@[?@[?...]]]``); real queries use one or two."""
@@ -399,3 +406,33 @@ def _member_equals(keys: tuple[str | int, ...], value: Any) -> Guard:
         return bool(node == value)
 
     return guard
+
+
+class SearchThread:
+    """Searches run on one thread of their own (a long query is compiled there too), each within
+    ``engine.time_budget_s`` counted from the request; at most ``MAX_PENDING_SEARCHES`` wait."""
+
+    def __init__(self, engine: SearchEngine) -> None:
+        self.engine = engine
+        self.thread = WorkThread("wott-directory-search", MAX_PENDING_SEARCHES, "searches",
+                                 "MAX_PENDING_SEARCHES")
+
+    async def run(self, query: str, data: Callable[[], Sequence[Any]],
+                  finish: Callable[[list[Any]], _R]) -> _R:
+        """``finish`` of what ``query`` selects from ``data()`` (400 on a bad query, 400/503 naming
+        the budget when it costs too much)."""
+        engine = self.engine
+        deadline = time.monotonic() + engine.time_budget_s
+        tds = data()
+
+        def run() -> _R:  # compiling a long query takes a while too: not on the IOLoop either
+            compiled = engine.compile(query)
+            return finish(compiled.run_within(tds, deadline, engine.time_budget_s, engine.max_nodes))
+
+        try:
+            return await self.thread.run(run, timeout_s=engine.time_budget_s + 1.0)
+        except TimeoutError:  # the thread checks its deadline itself; this only bounds the answer
+            raise SearchTimedOut(engine.time_budget_s) from None
+
+    def shutdown(self) -> None:
+        self.thread.shutdown()

@@ -1,14 +1,23 @@
-"""Persistence of TDs and events through SQLAlchemy, off the event loop.
+"""The directory's storage: TDs in memory for reads and search, SQLAlchemy for durability.
 
-Every write is one short transaction run on a single dedicated thread, so the
-IOLoop (which the hub shares with its devices) never waits on the database,
-and writes reach the database in the order the directory decided them.
+``ThingStore``: persistence of TDs and events. Every write is one short transaction run on a
+single dedicated thread, so the IOLoop (which the hub shares with its devices) never waits on
+the database, and writes reach the database in the order the directory decided them.
+
+``Catalogue``: every TD in a dict (id -> Enriched TD), loaded at start and changed only after
+the database committed the change (``stored``, ``removed``), so reads never touch the database
+and a failed write leaves both unchanged. It keeps what reads need beside it: the ids in order
+(``page``), the array searches run on (``snapshot``, rebuilt after a change), each TD's size
+(the store's byte budget), the marks (anonymous, the directory's own, held by the embedder,
+too deep to search) and the collection's ``etag``.
 """
 
 from __future__ import annotations
 
 import asyncio
+import bisect
 import json
+import secrets
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -21,8 +30,10 @@ from sqlalchemy.pool import StaticPool
 
 from .events import Event
 from .models import EventRow, ThingRow, create_schema
+from .registration import Enriched
+from .validation import MAX_TD_DEPTH, json_depth
 
-__all__ = ["StoredThing", "ThingStore", "make_engine"]
+__all__ = ["Catalogue", "StoredThing", "ThingStore", "make_engine"]
 
 T = TypeVar("T")
 
@@ -139,3 +150,79 @@ class ThingStore:
         self._executor.shutdown(wait=True)
         if self.owns_engine:
             self.engine.dispose()
+
+
+class Catalogue:
+    def __init__(self) -> None:
+        self.things: dict[str, Enriched] = {}
+        self.sizes: dict[str, int] = {}  # bytes of each stored TD's JSON
+        self.stored_bytes = 0
+        self.anonymous: set[str] = set()
+        self.own: set[str] = set()  # the directory's own TD(s)
+        self.held: set[str] = set()  # written by the embedder: HTTP clients may not change them
+        self.unsearchable: set[str] = set()  # stored before the depth limit, deeper than it
+        self.ids: list[str] = []  # ascending (code point order): what ``page`` serves
+        self._array: list[dict[str, Any]] | None = None
+        self._boot = secrets.token_hex(4)
+        self._version = 0
+
+    def load(self, things: Iterable[StoredThing]) -> None:
+        """What the database holds, at start."""
+        for t in things:
+            self.things[t.id] = Enriched.from_stored(t.td)
+            self.sizes[t.id] = t.size
+            self.stored_bytes += t.size
+            if t.anonymous:
+                self.anonymous.add(t.id)
+            if t.own:
+                self.own.add(t.id)
+            if json_depth(t.td, MAX_TD_DEPTH) > MAX_TD_DEPTH:
+                self.unsearchable.add(t.id)
+        self.ids = sorted(self.things)
+
+    @property
+    def etag(self) -> str:
+        """Changes whenever the collection does (any create, update, refresh, delete)."""
+        return f"{self._boot}-{self._version}"
+
+    def page(self, offset: int, limit: int) -> list[dict[str, Any]]:
+        return [self.things[i].td for i in self.ids[offset:offset + limit]]
+
+    def snapshot(self) -> list[dict[str, Any]]:
+        """The array JSONPath queries run on (shared, never mutated: treat as read-only)."""
+        if self._array is None:
+            skip = self.unsearchable
+            self._array = [self.things[i].td for i in self.ids if i not in skip]
+        return self._array
+
+    def row(self, thing_id: str, rec: Enriched, anonymous: bool) -> dict[str, Any]:
+        """What ``ThingStore.write`` stores for ``rec``."""
+        return {"id": thing_id, "td": rec.td, "anonymous": anonymous, "own": thing_id in self.own,
+                "created": rec.created, "modified": rec.modified, "expires": rec.expires}
+
+    def stored(self, thing_id: str, rec: Enriched, size: int, anonymous: bool) -> None:
+        """``rec`` (``size`` bytes of JSON) is in the database now."""
+        new = thing_id not in self.things
+        self.things[thing_id] = rec
+        self.stored_bytes += size - self.sizes.get(thing_id, 0)
+        self.sizes[thing_id] = size
+        self.unsearchable.discard(thing_id)  # a TD written now passed the depth check
+        if new:
+            bisect.insort(self.ids, thing_id)
+            if anonymous:
+                self.anonymous.add(thing_id)
+        self._changed()
+
+    def removed(self, thing_id: str) -> None:
+        """``thing_id`` is deleted from the database now."""
+        del self.things[thing_id]
+        self.stored_bytes -= self.sizes.pop(thing_id, 0)
+        self.anonymous.discard(thing_id)
+        self.held.discard(thing_id)
+        self.unsearchable.discard(thing_id)
+        del self.ids[bisect.bisect_left(self.ids, thing_id)]
+        self._changed()
+
+    def _changed(self) -> None:
+        self._version += 1
+        self._array = None

@@ -35,7 +35,8 @@ import jsonschema
 import jsonschema_rs
 from jsonschema.exceptions import ValidationError, best_match
 
-from .errors import BadRequest, ValidationFailed
+from .errors import BadRequest, DirectoryError, ValidationFailed
+from .mergepatch import apply_merge_patch
 
 __all__ = [
     "MAX_TD_DEPTH", "MAX_TTL_S", "check_depth", "check_td", "json_depth", "load_data", "parse_json_body",
@@ -185,6 +186,25 @@ def check_td(td: Any) -> dict[str, Any]:
         raise ValidationFailed(problems)
     valid: dict[str, Any] = td
     return valid
+
+
+def json_bytes(doc: Any) -> int:
+    """Bytes of ``doc``'s compact UTF-8 JSON (what it costs the directory's byte budgets)."""
+    return len(json.dumps(doc, ensure_ascii=False, separators=(",", ":")).encode("utf-8"))
+
+
+def patched(thing_id: str, td: dict[str, Any], patch: dict[str, Any], max_bytes: int) -> dict[str, Any]:
+    """``td`` with the merge ``patch`` applied, checked as a whole TD: its id unchanged, at most
+    ``max_bytes`` (413: a patch cannot grow a TD past what a PUT may send), valid."""
+    candidate = apply_merge_patch(td, patch)
+    if candidate.get("id") != thing_id:
+        raise ValidationFailed([{"field": "$.id",
+                                 "description": "the id of a TD cannot be changed or removed"}])
+    size = json_bytes({k: v for k, v in candidate.items() if k != "registration"})
+    if size > max_bytes:
+        raise DirectoryError(413, f"The patched TD would be {size} bytes, more than the {max_bytes} a TD may "
+                                  "have (max_body_bytes)")
+    return check_td(candidate)
 
 
 def _json_type(value: Any) -> str:

@@ -35,7 +35,8 @@ if TYPE_CHECKING:
     from wott_hub.plugins import DeviceConfig
     from wott_hub.plugins.registry import Registry
 
-__all__ = ["FIRST_FRAME_S", "OPEN_TIMEOUT_S", "DeviceCheck", "check_devices", "check_files", "open_devices"]
+__all__ = ["FIRST_FRAME_S", "OPEN_TIMEOUT_S", "DeviceCheck", "check_devices", "check_files", "check_usb",
+           "open_devices"]
 
 OPEN_TIMEOUT_S = 60.0
 """A device that has not opened (and closed) by then is reported as not opening: a check ends."""
@@ -172,6 +173,20 @@ def _bounds(prop: Mapping[str, Any]) -> str:
     low = f"at least {num(ge)}" if ge is not None else f"above {num(gt)}" if gt is not None else ""
     high = f"at most {num(le)}" if le is not None else f"below {num(lt)}" if lt is not None else ""
     return " and ".join(p for p in (low, high) if p)
+
+
+def check_usb(cfg: HubConfig, registry: Registry | None = None) -> list[str]:
+    """``[usb] adopt``: each a family an installed plugin provides, with USB devices it can adopt."""
+    if not cfg.usb.adopt:
+        return []
+    if registry is None:
+        from wott_hub.plugins import get_registry
+
+        registry = get_registry()
+    from wott_hub.discovery.usb_config import check_adopt
+
+    adoptable = [m.family for m in registry.usb_matches() if m.adoptable]
+    return check_adopt(cfg.usb, registry.families(), adoptable, cfg.source)
 
 
 def check_files(cfg: HubConfig) -> list[str]:

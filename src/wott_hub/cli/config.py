@@ -34,7 +34,7 @@ def load_checked(config: Path | None) -> tuple[HubConfig, list[DeviceCheck], lis
     line each; a ``ConfigError`` (every line of it) when the file's tables are wrong already."""
     from wott_hub.config import HubConfig
 
-    from ._check import check_devices, check_files
+    from ._check import check_devices, check_files, check_usb
 
     cfg = HubConfig.load(config) if config is not None else HubConfig.demo_config()
     if cfg.demo and not cfg.devices:
@@ -44,7 +44,7 @@ def load_checked(config: Path | None) -> tuple[HubConfig, list[DeviceCheck], lis
 
         cfg = replace(cfg, devices=tuple(demo_devices()))
     devices = check_devices(cfg)
-    problems = [*check_files(cfg), *(line for d in devices for line in d.errors)]
+    problems = [*check_files(cfg), *check_usb(cfg), *(line for d in devices for line in d.errors)]
     return cfg, devices, problems
 
 
@@ -98,6 +98,8 @@ def check(
     if config is not None and cfg.demo:
         what += " (no [[device]]: the demo fleet)"
     summary = f"{what}: {len(devices)} device(s)"
+    if cfg.usb.adopt:  # docs/usb.md
+        summary += f" and USB {', '.join(cfg.usb.adopt)} when plugged in"
     if code == 0:
         typer.echo(f"{summary}: OK{' (each opened and closed)' if open_ else ''}")
     else:

@@ -180,6 +180,9 @@ def banner(hub: Hub, info: dict[str, Any], cfg: HubConfig) -> list[str]:
         lines += [f"  history    {describe(info['database'])}", f"             {_retention(cfg)}"]
     else:
         lines.append("  history    off")
+    if usb := info.get("usb"):
+        said = f"adopting {', '.join(usb['adopt'])} when plugged in"
+        lines.append(f"  USB        {said}" + (f"; NOT: {usb['error']}" if usb["error"] else ""))
     count = f"{len(served)} serving" + (f", {len(failed)} FAILED (retried)" if failed else "")
     lines.append(f"  devices: {count}")
     width = max((len(d) for d in [*served, *failed]), default=0)

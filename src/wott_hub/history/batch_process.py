@@ -8,7 +8,7 @@ history at all (docs/history.md, "The writer's process"). Here the writer's thre
 each batch's records over, as they are, and waits (GIL released) while this process has the
 same storage engine (``engines.open_storage``) encode and commit them; the writer keeps
 everything else (queue, lease, reservations, isolation of refused records, health, retention).
-A backlog (``writer._CATCH_UP``) the thread writes itself: handing over costs ~8 µs a record,
+A backlog (``batch_writer.CATCH_UP``) the thread writes itself: handing over costs ~8 µs a record,
 more than catching up can spare.
 
 Protocol: two pipes of pickled messages (``multiprocessing.connection`` framing), strictly

@@ -25,6 +25,8 @@ Contract:
   takes it over otherwise (a hub renamed, or gone for good).
 - A writer that finds its lease taken over stops writing (see writer.py):
   a paused hub must not interleave with the one that took its place.
+- Kept by its holder's writer thread: ``keep`` refreshes the heartbeat every ``stale_s / 6`` s
+  (``next_refresh``), so a holder must stall for five refreshes in a row to lose it.
 """
 
 from __future__ import annotations
@@ -125,6 +127,7 @@ class Lease:
         self.stale_s = stale_s
         self.held = False
         self.lost = ""  # why the lease was lost (someone took it over), else ""
+        self.next_refresh = 0.0  # time.monotonic() when ``keep`` refreshes the heartbeat next
 
     @property
     def me(self) -> str:
@@ -173,19 +176,31 @@ class Lease:
                     self._insert_row(conn)  # this hub id's first writer (or a hand-migrated database)
                     taken = self._take(conn)
             if taken:
-                self.held, self.lost = True, ""
+                self._taken()
                 return
             other = self.holder()
             if other is not None and not _alive_here(other):
                 with self.engine.begin() as conn:
                     if self._take(conn, also_holder=other.holder):
-                        self.held, self.lost = True, ""
+                        self._taken()
                         return
                 other = self.holder()
         who = str(other) if other is not None else "another process"
         same = "" if self.hub_id == DEFAULT_HUB_ID else f" with the same hub id {self.hub_id!r}"
         raise Conflict(f"the history database {describe(self.engine.url)!r} is in use by another hub{same}: "
                        f"{who}; stop it first, or give this hub another database or hub id")
+
+    def _taken(self) -> None:
+        self.held, self.lost = True, ""
+        self.next_refresh = time.monotonic() + self.stale_s / 6
+
+    def keep(self) -> bool:
+        """Refresh the heartbeat if it is due (every ``stale_s / 6`` s while held); False only when
+        this refresh found the lease taken over (``lost`` says by whom)."""
+        if not self.held or time.monotonic() < self.next_refresh:
+            return True
+        self.next_refresh = time.monotonic() + self.stale_s / 6
+        return self.refresh()
 
     def refresh(self) -> bool:
         """Move the heartbeat; False (and ``lost`` says why) if another process took the lease."""

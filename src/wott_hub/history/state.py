@@ -8,14 +8,20 @@ and the writer's spool says here that history lacks records for now.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from sqlalchemy.engine import Engine
 
+from wott_hub.errors import HistoryError
+
 __all__ = ["DatabaseState", "is_corruption", "state_of"]
+
+log = logging.getLogger("wott_hub.history.writer")  # the writer runs the check: its log, as before
 
 _CORRUPT = ("malformed", "not a database", "corrupt", "disk i/o error")
 
@@ -42,6 +48,20 @@ class DatabaseState:
         self.last_read_error_at = time.monotonic()
         if is_corruption(message):
             self.integrity = message
+
+    def check(self, scan: Callable[[], None]) -> None:
+        """Run ``scan`` (the storage's integrity check: ``HistoryError`` naming the damage) and keep
+        what it found in ``integrity``; a check that could not run is reported, not guessed."""
+        try:
+            scan()
+        except HistoryError as e:
+            self.integrity = str(e)
+            log.error("%s", e)
+        except Exception as e:  # the check itself could not run: report, do not guess
+            log.warning("history integrity check did not run: %s", e)
+        else:
+            if self.integrity is None:
+                self.integrity = "ok"
 
     @property
     def corrupted(self) -> str:

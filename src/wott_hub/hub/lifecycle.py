@@ -49,6 +49,7 @@ from .recording import HubHistory
 from .replay import ReplayRuntime, Replays
 from .status import HubStatus
 from .things import Things
+from .usb import UsbAdoption
 
 if TYPE_CHECKING:
     from wott_hub.drivers.base import Driver
@@ -85,6 +86,8 @@ class Hub:
         self._episodes = Episodes(self._plane, self._things, self._history)  # startEpisode/endEpisode
         # device actions and the hub Thing's addDevice/removeDevice/restartDevice (management.py)
         self._management = FleetManagement(cfg, self._fleet, DeviceActions(self._fleet, self._plane))
+        # [usb] adopt: devices opened when plugged in, disconnected when unplugged (usb.py)
+        self._usb = UsbAdoption(cfg.usb, self._fleet, self._management) if cfg.usb.enabled else None
         self._status = HubStatus(self._plane, self._fleet, self._replay, self._history, lambda: self.state)
         # TD directory, registrations, mDNS (src/wott_hub/network/)
         self._network = HubNetwork(NetworkPort(cfg, self._server, self._history, self._fleet, self._identity),
@@ -127,6 +130,8 @@ class Hub:
         await self._network.start()  # the directory opens on the history database
         self._fleet.live = True
         self._management.start()  # devices that failed to open are retried with backoff
+        if self._usb is not None:
+            await self._usb.start()
         self.state = "ok"
 
     async def stop(self) -> None:
@@ -140,6 +145,8 @@ class Hub:
         await self._network.stop()
         self._status.stop_watching()
         self._replay.cancel_all()
+        if self._usb is not None:
+            await self._usb.stop()
         await self._management.stop()
         await self._fleet.stop()
         if self._mqtt is not None:
@@ -330,5 +337,6 @@ class Hub:
             "database": str(self._history.engine.url) if self._history.engine is not None else None,
             "mqtt": self._mqtt.health()["broker"] if self._mqtt is not None else None,
             "foxglove": self._foxglove.url if self._foxglove is not None else None,
+            "usb": self._usb.describe() if self._usb is not None else None,
             **self._network.describe(),
         }

@@ -88,6 +88,7 @@ class HubHistory:
                 if self._closing:
                     raise _Closed
                 writer = HistoryWriter(engine, batch_max=cfg.history_batch_max,
+                                       queue_max_bytes=int(cfg.history_queue_mb * 1e6),
                                        interval_s=cfg.commit_interval_s, retention=cfg.retention,
                                        on_commit=committed, process=cfg.history_process,
                                        spool=Spool(spool_folder(cfg, self.hub_id),

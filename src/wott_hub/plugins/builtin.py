@@ -1,5 +1,6 @@
 """The plugin inside the core package: family ``scene``, the ground-truth driver, and
-family ``wot-remote``, tactile devices that speak WoT themselves (``wot_remote.py``).
+family ``wot-remote``, tactile devices that speak WoT themselves (``wot_remote.py``); and the USB
+ids of the gel sensors' cameras (``usb_cameras.py``), whose families are another plugin's.
 
 A ``scene`` device plays a scripted scene on one of the example skins and
 yields its ground-truth displacement directly (no raw signal, no simulator of
@@ -17,7 +18,7 @@ from wott_hub.tactile.materials import MATERIALS
 
 from . import wot_remote
 from .hookspecs import hookimpl
-from .model import DeviceConfig, FamilyInfo
+from .model import DeviceConfig, FamilyInfo, UsbMatch
 from .naming import naming_device
 from .settings import Meta, SettingsModel, read_settings, settings_schema
 
@@ -100,3 +101,10 @@ def wott_hub_open_device(config: DeviceConfig) -> Driver:
 @hookimpl
 def wott_hub_claim_td(td: dict[str, Any]) -> DeviceConfig | None:
     return wot_remote.claim_td(td)
+
+
+@hookimpl
+def wott_hub_usb_devices() -> list[UsbMatch]:
+    from .usb_cameras import CAMERAS
+
+    return list(CAMERAS)

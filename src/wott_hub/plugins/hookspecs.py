@@ -21,7 +21,7 @@ import pluggy
 if TYPE_CHECKING:
     from wott_hub.drivers.base import Driver
 
-    from .model import DeviceConfig, FamilyInfo
+    from .model import DeviceConfig, FamilyInfo, UsbMatch
 
 __all__ = ["PROJECT", "hookimpl", "hookspec"]
 
@@ -82,4 +82,18 @@ def wott_hub_claim_td(td: dict[str, Any]) -> DeviceConfig | None:
     hub), plugin by plugin until one claims it. Return a ``DeviceConfig`` whose
     driver consumes that Thing and yields ``TactileFrame``s, so the hub
     re-exposes it with a Tactile TD; or None if this plugin cannot adapt it.
+    """
+
+
+@hookspec
+def wott_hub_usb_devices() -> list[UsbMatch]:
+    """The USB devices this plugin knows, by their udev properties, and how each becomes a device.
+
+    Called when the registry is asked for the USB matches (``wott-hub discover --usb``, and a hub
+    with ``[usb] adopt`` at start-up). Return a list of ``UsbMatch(family, subsystem, label, ...)``:
+    the rules on udev properties (``vendor_id``/``product_ids``, ``model``, ``v4l_product``), the
+    setting that gets the device node (``device`` for a camera, ``port`` for a serial board; None:
+    listed only), the Thing id prefix put before the serial number and any preset settings. A match
+    may name a family no installed plugin provides (the device is then listed, never adopted); a
+    declaration that can never match is an error of the plugin. Keep it cheap: no I/O here.
     """

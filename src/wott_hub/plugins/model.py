@@ -17,8 +17,8 @@ from typing import Annotated, Any
 from wott_hub.configspec import Model, read, says
 from wott_hub.errors import InvalidInput, SettingsError
 
-__all__ = ["DEVICE_ID_PATTERN", "DEVICE_ID_RULE", "DeviceConfig", "DeviceTable", "FamilyInfo", "PluginInfo",
-           "check_device_id", "device_id_from"]
+__all__ = ["DEVICE_ID_PATTERN", "DEVICE_ID_RULE", "USB_SUBSYSTEMS", "DeviceConfig", "DeviceTable",
+           "FamilyInfo", "PluginInfo", "UsbMatch", "check_device_id", "device_id_from"]
 
 DEVICE_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._~-]{0,63}$"
 """A device id every binding takes as it is (module docstring)."""
@@ -112,3 +112,74 @@ class PluginInfo:
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "distribution": self.distribution, "version": self.version,
                 "families": list(self.families), "hooks": list(self.hooks), "error": self.error}
+
+
+USB_SUBSYSTEMS = ("video4linux", "tty")
+"""The udev subsystems a ``UsbMatch`` may name: a camera's /dev/videoN, a serial board's /dev/ttyACMn."""
+
+_USB_ID = re.compile(r"^[0-9a-f]{4}$")
+
+
+@dataclass(frozen=True)
+class UsbMatch:
+    """Which USB devices are of ``family``, by their udev properties (``wott_hub_usb_devices``).
+
+    A device matches when it is in ``subsystem`` and every rule given holds (rules left out hold):
+    ``vendor_id`` and one of ``product_ids`` (``ID_VENDOR_ID``/``ID_MODEL_ID``, 4 lower-case hex digits),
+    ``model`` (``ID_MODEL`` equal, udev's spaces as ``_``), ``v4l_product`` (a part of the V4L2 name,
+    ``ID_V4L_PRODUCT``). Adopted (``[usb] adopt``), it becomes the device ``<id_prefix>-<serial>``
+    (``ID_SERIAL_SHORT``; default prefix: the family) of ``family``, with ``settings`` and its device
+    node given as ``setting`` (``device`` for a camera, ``port`` for a serial board). ``setting`` None:
+    the device is only listed, never adopted (a bridge whose device is reached another way). ``label``
+    says what the device is, for ``wott-hub discover --usb``.
+    """
+
+    family: str
+    subsystem: str
+    label: str
+    vendor_id: str | None = None
+    product_ids: tuple[str, ...] = ()
+    model: str | None = None
+    v4l_product: str | None = None
+    setting: str | None = None
+    id_prefix: str = ""
+    settings: Mapping[str, Any] = field(default_factory=dict)
+
+    def problem(self) -> str | None:
+        """Why this declaration can never match or be adopted, or None."""
+        if self.subsystem not in USB_SUBSYSTEMS:
+            return f"subsystem {self.subsystem!r} is not one of {list(USB_SUBSYSTEMS)}"
+        ids = ([self.vendor_id] if self.vendor_id is not None else []) + list(self.product_ids)
+        if bad := [i for i in ids if not isinstance(i, str) or not _USB_ID.match(i)]:
+            return f"USB id {bad[0]!r} is not 4 lower-case hex digits"
+        if self.product_ids and self.vendor_id is None:
+            return "product_ids without a vendor_id"
+        if self.vendor_id is None and self.model is None and self.v4l_product is None:
+            return "no rule: give vendor_id, model or v4l_product"
+        if self.id_prefix and device_id_from(self.id_prefix, "") != self.id_prefix:
+            return f"id_prefix {self.id_prefix!r}: {DEVICE_ID_RULE}"
+        if self.setting is not None and self.setting in self.settings:
+            return f"setting {self.setting!r} is also in settings"
+        return None
+
+    def matches(self, subsystem: str, properties: Mapping[str, str]) -> bool:
+        """Does a udev device of ``subsystem`` with ``properties`` match? (No I/O: tests give dicts.)"""
+        if subsystem != self.subsystem:
+            return False
+        if self.vendor_id is not None and properties.get("ID_VENDOR_ID", "").lower() != self.vendor_id:
+            return False
+        if self.product_ids and properties.get("ID_MODEL_ID", "").lower() not in self.product_ids:
+            return False
+        if self.model is not None and properties.get("ID_MODEL") != self.model:
+            return False
+        return self.v4l_product is None or self.v4l_product in properties.get("ID_V4L_PRODUCT", "")
+
+    @property
+    def adoptable(self) -> bool:
+        return self.setting is not None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"family": self.family, "subsystem": self.subsystem, "label": self.label,
+                "vendor_id": self.vendor_id, "product_ids": list(self.product_ids), "model": self.model,
+                "v4l_product": self.v4l_product, "setting": self.setting,
+                "id_prefix": self.id_prefix or self.family, "settings": dict(self.settings)}

@@ -27,7 +27,7 @@ from . import hookspecs
 from .dict_schema import with_defaults
 from .isolation import Fault, attempt
 from .loader import ENTRY_POINT_GROUP, describe_exception, discover, selected_names
-from .model import DeviceConfig, FamilyInfo, PluginInfo
+from .model import DeviceConfig, FamilyInfo, PluginInfo, UsbMatch
 from .settings import model_settings, settings_schema
 
 if TYPE_CHECKING:
@@ -326,6 +326,34 @@ class Registry:
             else:
                 return result
         return None
+
+    def usb_matches(self) -> list[UsbMatch]:
+        """Every plugin's USB matches (``wott_hub_usb_devices``), in registration order (built-ins first);
+        a declaration that can never match is recorded against its plugin and left out, a repeated
+        one kept once."""
+        hook = "wott_hub_usb_devices"
+        answers: dict[str, list[Any]] = {}
+        for name, result in self._call_each(hook):
+            answers.setdefault(name, []).append(result)
+        out: list[UsbMatch] = []
+        for name in [n for n in self._records if n in answers]:
+            for result in answers[name]:
+                if not isinstance(result, list | tuple):
+                    self._record_error(name, hook,
+                                       f"returned {type(result).__name__}, not a list of UsbMatch")
+                    continue
+                self._accept_usb(name, result, out)
+        return out
+
+    def _accept_usb(self, name: str, result: list[Any] | tuple[Any, ...], out: list[UsbMatch]) -> None:
+        hook = "wott_hub_usb_devices"
+        for match in result:
+            if not isinstance(match, UsbMatch):
+                self._record_error(name, hook, f"returned a {type(match).__name__}, not a UsbMatch")
+            elif (problem := match.problem()) is not None:
+                self._record_error(name, hook, f"USB match for family {match.family!r}: {problem}")
+            elif match not in out:
+                out.append(match)
 
     # -- reporting -----------------------------------------------------------
     def failed_plugins(self) -> dict[str, str]:

@@ -124,7 +124,7 @@ class DevicePipeline:
         self.thing = thing
         self.driver = driver  # a Driver; in the hub, a worker's proxy when processor is None
         self.processor = processor  # None: the device's frames are processed in a worker process
-        self.state = "starting"  # starting | running | ended | failed (else the driver's health)
+        self.state = "starting"  # starting | running | ended | failed | unplugged (else the driver's health)
         self.reason = ""
         self.frames = 0
         self.frame_errors = 0
@@ -190,6 +190,8 @@ class DevicePipeline:
         """
         if self.state in ("ended", "failed", "starting"):
             return self.state, self.reason
+        if self.state == "unplugged":  # its USB device is gone (hub/usb.py): no driver runs to ask
+            return "disconnected", self.reason
         out = self.guard.call("health()", _health_of, self.driver)
         if out.fault is not None:
             return "degraded", out.fault.reason
@@ -259,6 +261,11 @@ class DevicePipeline:
     def ended(self, reason: str) -> None:
         """The driver's frame stream ended: the device is done."""
         self.state, self.reason = "ended", reason
+
+    def unplugged(self, reason: str) -> None:
+        """Its USB device was unplugged (``hub.usb``): the driver is closed until the device comes back;
+        health says ``disconnected`` with ``reason``."""
+        self.state, self.reason = "unplugged", reason
 
     def failed(self, reason: str) -> None:
         """The device cannot run now (its driver did not open, its worker process exited...)."""

@@ -5,15 +5,20 @@ finger its id), so it works the same for every device family, and a finger's mot
 is its own: two fingers that swap places in a ranking by size do not make one
 finger jump. Times are the frames' own (the device's clock, not the arrival of the
 frame), and every speed is a least-squares line through the finger's held positions
-of the last ``speed_window_s`` of frame time (and at least ``speed_frames`` of them:
-a camera skin's location moves in steps of its marker grid), never a difference over
-one frame interval. Each action is emitted once when its condition first holds:
+of the last ``speed_window_s`` of frame time (0.4 s: twelve frames of a 30 frames/s
+camera, whose location moves in steps of its marker grid), never a difference over
+one frame interval nor a count of frames. So a frame that is skipped (dropped by a
+busy reader, lost on the line) or that arrives late changes nothing that is derived:
+every duration is a difference of frame times, the press window's start is the
+finger's position interpolated at that instant between the held frames either side
+of it, and a speed's window is a span of time, however many frames fell in it.
+Each action is emitted once when its condition first holds:
 
 - ``touch`` / ``collision``: the first frame with a contact; collision when the
   deepest node moved faster than ``collision_speed_mm_s`` since the last rest frame.
 - ``press``: the touch has lasted ``press_s``, no finger is slipping and every
-  finger is still: over the last ``press_s`` it moved less than half its slip
-  distance.
+  finger is still: over the last ``press_s`` (from its position interpolated at
+  that instant) it moved less than half its slip distance.
 - ``slip``: a finger moved more than its slip distance from where it settled, or
   its mean shear exceeded ``slip_shear_ratio`` x its mean normal depth, in two
   held frames in a row (a camera estimate's location can jump once). The slip
@@ -63,8 +68,7 @@ class ActionParams:
     slip_size_ratio: float = 0.25
     slip_shear_ratio: float = 1.0
     hold_ratio: float = 0.5
-    speed_window_s: float = 0.2
-    speed_frames: int = 12
+    speed_window_s: float = 0.4
     pinch_mm: float = 3.0
     pinch_peak_ratio: float = 0.3
     collision_speed_mm_s: float = 150.0
@@ -132,19 +136,20 @@ class _Finger:
         self.slipping = self.pinched = self.sheared = False
         self.still = True
 
-    def speed(self, window_s: float, frames: int) -> float:
-        """mm/s over the held frames of the last ``window_s`` of frame time, ``frames`` of them at
-        least: the slope of a least-squares line through their positions (a camera skin's location
-        moves by steps of its marker grid, a line through several frames follows the finger, not
-        the steps)."""
+    def speed(self, window_s: float) -> float:
+        """mm/s over the held frames of the last ``window_s`` of frame time (the last two if fewer
+        fell in it): the slope of a least-squares line through their positions (a camera skin's
+        location moves by steps of its marker grid, a line through several frames follows the
+        finger, not the steps). A window of time, not of frames: frames skipped in it leave the
+        slope as it was."""
         samples = self.samples
         if len(samples) < 2:
             return 0.0
         end = samples[-1][0]
         edge = end - int(window_s * 1e9)
         recent = [s for s in samples if s[0] >= edge]
-        if len(recent) < frames:
-            recent = list(samples)[-frames:]
+        if len(recent) < 2:
+            recent = list(samples)[-2:]
         ts = [(t - end) / 1e9 for t, _ in recent]
         mean_t = sum(ts) / len(ts)
         var = sum((t - mean_t) ** 2 for t in ts)
@@ -160,8 +165,7 @@ class ActionDetector:
 
     def __init__(self, params: ActionParams | None = None) -> None:
         self.p = p = params or ActionParams()
-        self._horizon_ns = int(max(p.press_s, p.speed_window_s) * 1e9)  # the held positions kept...
-        self._keep = max(2, p.speed_frames)  # ...and at least this many
+        self._horizon_ns = int(max(p.press_s, p.speed_window_s) * 1e9)  # the held positions kept
         self._press_ns = p.press_s * 1e9
         self._hold, self._slip_mm, self._shear_k = p.hold_ratio, p.slip_mm, p.slip_shear_ratio
         self._size_k = p.slip_size_ratio / math.sqrt(math.pi)  # x sqrt(area): x the contact's radius
@@ -214,18 +218,12 @@ class ActionDetector:
         samples = f.samples
         samples.append((t_ns, loc))
         horizon = t_ns - self._horizon_ns
-        while len(samples) > self._keep and samples[1][0] <= horizon:
+        while len(samples) > 2 and samples[1][0] <= horizon:  # one at or before the horizon stays
             samples.popleft()
         slip = f.slip_mm = max(self._slip_mm, self._size_k * math.sqrt(c.area))
         ax, ay, az = f.anchor
         f.moved = math.sqrt((x - ax) ** 2 + (y - ay) ** 2 + (z - az) ** 2)
-        press_edge = t_ns - self._press_ns
-        start = samples[0]
-        for sample in samples:  # the oldest held position within the last press_s (or the oldest)
-            if sample[0] >= press_edge:
-                start = sample
-                break
-        sx, sy, sz = start[1]
+        sx, sy, sz = self._press_start(samples, t_ns - self._press_ns)
         travel = f.travel = math.sqrt((x - sx) ** 2 + (y - sy) ** 2 + (z - sz) ** 2)
         f.still = travel < 0.5 * slip
         if not f.slipping and not f.pinched:
@@ -233,6 +231,21 @@ class ActionDetector:
             f.sheared = hx * hx + hy * hy + hz * hz > (self._shear_k * max(c.depth, 1e-9)) ** 2
             f.over = f.over + 1 if f.moved > slip or f.sheared else 0
         return True
+
+    @staticmethod
+    def _press_start(samples: deque[tuple[int, Point]], edge_ns: float) -> Point:
+        """Where the finger was ``press_s`` ago: interpolated in frame time between the held frames
+        either side of that instant (so a frame skipped there does not shorten the window), or
+        where it was first held if that is later."""
+        t0, a = samples[0]
+        if t0 >= edge_ns:
+            return a
+        for t1, b in samples:
+            if t1 >= edge_ns:
+                w = (edge_ns - t0) / (t1 - t0)
+                return (a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2]))
+            t0, a = t1, b
+        return a
 
     def _touched(self, t_ns: int, contacts: list[Contact], out: list[str], ev: list[ActionEvidence]) -> None:
         p = self.p
@@ -330,7 +343,7 @@ class ActionDetector:
                     return
 
     def _speed(self, f: _Finger) -> float:
-        return f.speed(self.p.speed_window_s, self.p.speed_frames)
+        return f.speed(self.p.speed_window_s)
 
     def _reset(self) -> None:
         self._onset_ns = None

@@ -14,6 +14,7 @@ from wott_hub.plugin_api import (
     Driver,
     FamilyInfo,
     Meta,
+    UsbMatch,
     hookimpl,
     naming_device,
     read_settings,
@@ -62,6 +63,28 @@ def wott_hub_families() -> list[FamilyInfo]:
         "the field change in µT per magnetometer, contacts from it (no force).",
         AnySkinSettings,
     )]
+
+
+# The boards' USB ids (docs/skins.md, "USB ids"): Adafruit's SAMD Arduino core (boards.txt,
+# adafruit_qtpy_m0 0x80CB, adafruit_trinket_m0 0x801E) and CircuitPython (ports/atmel-samd/boards/
+# qtpy_m0 0x80CC, trinket_m0 0x801F). AnySkin's board carries a QT Py, ReSkin's a Trinket.
+_QT_PY = "Adafruit QT Py M0 (AnySkin board; {})"
+_TRINKET = "Adafruit Trinket M0 (ReSkin board; {})"
+USB_MATCHES = (
+    UsbMatch(FAMILY, "tty", _QT_PY.format("Arduino"), vendor_id="239a", product_ids=("80cb",), setting="port",
+             settings={"board": "anyskin"}),
+    UsbMatch(FAMILY, "tty", _QT_PY.format("CircuitPython"), vendor_id="239a", product_ids=("80cc",),
+             setting="port", settings={"board": "anyskin"}),
+    UsbMatch(FAMILY, "tty", _TRINKET.format("Arduino"), vendor_id="239a", product_ids=("801e",),
+             setting="port", id_prefix="reskin", settings={"board": "reskin"}),
+    UsbMatch(FAMILY, "tty", _TRINKET.format("CircuitPython"), vendor_id="239a", product_ids=("801f",),
+             setting="port", id_prefix="reskin", settings={"board": "reskin"}),
+)
+
+
+@hookimpl
+def wott_hub_usb_devices() -> list[UsbMatch]:
+    return list(USB_MATCHES)
 
 
 @hookimpl

@@ -3,7 +3,15 @@
 Frame ``k`` is made by ``make(k)`` and sent at ``t0 + k / rate_hz``. Like a board powered from the USB
 cable, it sends nothing while unplugged (``make`` is not called) and, plugged back in, starts afresh
 (``on_replug``). A UART does not wait for its reader: when more than four frames are still unread in
-the pty the new one is dropped (and counted), and a late writer thread skips time rather than bursting.
+the pty the new one is dropped (and counted).
+
+A real board's clock does not stop when the computer simulating it is busy: every frame it would have
+sent was sampled at its own instant. So a writer thread that wakes up late (a loaded machine stalls a
+thread for tens of milliseconds, now and then for longer) sends the frames it missed, each ``make(k)``
+for its own ``k``, rather than skipping them: the reader sees a burst of frames that were sampled at
+their right times, exactly what a serial link delivers after the reader stalled. Only a stall longer
+than ``catch_up_s`` (1 s: a suspended process) skips time, and those ticks are counted
+(``ticks_skipped``): ``k`` jumps, so a board that numbers its frames by ``k`` shows the gap.
 """
 
 from __future__ import annotations
@@ -19,13 +27,15 @@ __all__ = ["SimulatedLine"]
 
 class SimulatedLine:
     def __init__(self, port: PtyPort, rate_hz: float, make: Callable[[int], bytes],
-                 on_replug: Callable[[], None] | None = None) -> None:
+                 on_replug: Callable[[], None] | None = None, *, catch_up_s: float = 1.0) -> None:
         if not rate_hz > 0:
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         self.port = port
         self.rate_hz = float(rate_hz)
         self.frames_sent = 0
         self.frames_dropped = 0  # the line was busy (nobody reading): a real UART overruns too
+        self.ticks_skipped = 0  # the writer stalled longer than catch_up_s: time skipped, nothing sent
+        self.catch_up_s = float(catch_up_s)
         self.lock = threading.Lock()  # held while a frame is made and sent
         self._make = make
         self._on_replug = on_replug
@@ -54,8 +64,10 @@ class SimulatedLine:
             if delay > 0:
                 if self._stop.wait(delay):
                     break
-            elif delay < -period:
-                k += int(-delay / period)  # late: skip time, keep the frames' own numbering gapless
+            elif delay < -self.catch_up_s:  # stalled for long: skip to now (the missed ticks are lost)
+                skip = int(-delay / period)
+                self.ticks_skipped += skip
+                k += skip
                 continue
             self._send(k)
             k += 1

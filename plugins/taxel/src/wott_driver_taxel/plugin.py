@@ -16,6 +16,7 @@ from wott_hub.plugin_api import (
     Driver,
     FamilyInfo,
     Meta,
+    UsbMatch,
     hookimpl,
     naming_device,
     settings_schema,
@@ -92,6 +93,27 @@ class TaxelSettings(BackoffSettings):
 
 
 SCHEMA: dict[str, Any] = settings_schema(TaxelSettings)
+
+
+# Boards of the uncalibrated matrices (docs/skins.md, "USB ids"): FlexiTac's firmware is flashed to
+# an Arduino Uno (its README: --fqbn arduino:avr:uno), whose ids are Arduino's AVR core's
+# (boards.txt: uno.vid/pid 2341:0043, 2341:0001, 2a03:0043, 2341:0243, 2341:006a); 3D-ViTac's readme
+# binds its board by an FTDI serial number ("FT6S4DSP"): an FT232R, 0403:6001 (Linux
+# drivers/usb/serial/ftdi_sio_ids.h), as on an Arduino Nano. An Uno or an FTDI cable may well be
+# something else: adopted only where [usb] adopt names this family.
+USB_MATCHES = (
+    *(UsbMatch(FAMILY, "tty", "Arduino Uno (FlexiTac readout)", vendor_id=v, product_ids=p, setting="port",
+               id_prefix="flexitac", settings={"protocol": "flexitac"})
+      for v, p in (("2341", ("0043", "0001", "0243", "006a")), ("2a03", ("0043",)))),
+    UsbMatch(FAMILY, "tty", "FTDI FT232R USB-serial (3D-ViTac readout, e.g. an Arduino Nano)",
+             vendor_id="0403", product_ids=("6001",), setting="port", id_prefix="3dvitac",
+             settings={"protocol": "3dvitac"}),
+)
+
+
+@hookimpl
+def wott_hub_usb_devices() -> list[UsbMatch]:
+    return list(USB_MATCHES)
 
 
 @hookimpl

@@ -8,8 +8,13 @@ encoded in the configured protocol. The ground truth of the recent frames is
 kept by sequence number, so a test can compare what the hub recovered with
 what was pressed.
 
-Its line (``line.SimulatedLine``) paces it, stops while unplugged and skips scene time when late;
-plugged back in, the board restarts its sequence at 0, which never skips a number.
+Its line (``line.SimulatedLine``) paces it and stops while unplugged; a late writer sends the
+frames it missed (each sampled at its own tick), so the frames' sequence numbers keep the board's
+time: frame k goes out numbered k (from the tick the board was last plugged in), and a tick that was
+never sent (a stall beyond the line's ``catch_up_s``, an overrun) is a gap in the numbers, which the
+driver's clock reads as frames lost on the line. Plugged back in, the board restarts its sequence
+at 0. ``scene_time(seq)`` says which scene instant a recent frame showed (the accuracy bench scores
+each frame against it).
 """
 
 from __future__ import annotations
@@ -63,8 +68,8 @@ class TaxelSimulator:
         self.line = SimulatedLine(PtyPort(link), rate_hz, self._make, on_replug=self._restart)
         self.port = self.line.port
         self._history = history
-        self._truth: OrderedDict[int, np.ndarray] = OrderedDict()
-        self._seq = 0
+        self._truth: OrderedDict[int, tuple[int, np.ndarray]] = OrderedDict()  # seq -> (k, truth)
+        self._k0: int | None = None  # the tick numbered 0 (the board's power-on); None: the next one
         self._normals = mesh.normals
 
     @property
@@ -94,21 +99,29 @@ class TaxelSimulator:
     def truth(self, seq: int) -> np.ndarray | None:
         """Ground truth of the recent frame sent with sequence number ``seq`` (None if forgotten)."""
         with self.line.lock:
-            return self._truth.get(seq)
+            kept = self._truth.get(seq)
+        return None if kept is None else kept[1]
+
+    def scene_time(self, seq: int) -> float | None:
+        """Scene time (s) of the recent frame sent with sequence number ``seq`` (None if forgotten)."""
+        with self.line.lock:
+            kept = self._truth.get(seq)
+        return None if kept is None else kept[0] / self.rate_hz
 
     def _make(self, k: int) -> bytes:
         """Frame ``k``, numbered (the line holds its lock)."""
         counts, truth = self.frame(k)
-        seq = self._seq
-        self._seq = (seq + 1) % SEQ_MODULO
-        self._truth[seq] = truth
+        if self._k0 is None:
+            self._k0 = k
+        seq = (k - self._k0) % SEQ_MODULO
+        self._truth[seq] = (k, truth)
         while len(self._truth) > self._history:
             self._truth.popitem(last=False)
         return self.encode(seq, counts)
 
     def _restart(self) -> None:
         """Plugged back in: the board counts from 0 again."""
-        self._seq = 0
+        self._k0 = None
         self._truth.clear()
 
     # -- the line --------------------------------------------------------------

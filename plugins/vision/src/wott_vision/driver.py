@@ -34,7 +34,8 @@ recorded source (a reader with ``recorded`` true: video files, image
 sequences) stamps each frame with its recorded time ``t_s`` from the start,
 mapped onto the hub clock when the source was opened (a replayed loop continues
 after the last frame, never backwards); it paces itself (``realtime``) or runs
-as fast as read. A simulator with ``realtime = false`` uses its scene time.
+as fast as read. A simulator with ``realtime = false`` uses its scene time; in real time, the
+instant its frame was due (``captured_s``, monotonic: a late read does not move the frame in time).
 
 The rest reference survives a reconnect (the camera did not move relative to
 the skin); only the tracker restarts from it. Nothing here imports cv2: the
@@ -199,8 +200,8 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
     implements ``_estimate``. ``max_frames`` stops after that many frames
     (tests, recording a known sequence). ``prepare`` runs once in the worker
     thread before the source is first opened (start-up work too slow for
-    ``open_device``). ``last_estimate`` and ``last_truth`` (simulators only)
-    describe the frame last estimated.
+    ``open_device``). ``last_estimate``, ``last_truth`` and ``last_truth_t_s``
+    (simulators only: the scene time of that truth) describe the frame last estimated.
     """
 
     reference_error: ClassVar[type[Exception]]
@@ -231,6 +232,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         self.reconnects = 0
         self.last_estimate: Any = None
         self.last_truth: np.ndarray | None = None
+        self.last_truth_t_s: float | None = None
         self._reader: FrameReader | None = None
         self._lock = threading.Lock()  # a reader is never released while a thread reads it
         self._closed = asyncio.Event()
@@ -330,6 +332,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             ok, images = reader.read()
             t_ns = self._timestamp(reader)
             truth = getattr(reader, "truth", None)
+            truth_t_s = getattr(reader, "t_s", None) if truth is not None else None
         if not ok or images is None:
             if getattr(reader, "ended", False):
                 raise _SourceEnded
@@ -351,7 +354,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                 return None
             self.set_health(Health.ok)
             displacement = np.zeros((self.description.mesh.n_nodes, 3))  # the rest frame itself
-        self.last_truth = truth
+        self.last_truth, self.last_truth_t_s = truth, truth_t_s
         return None if displacement is None else TactileFrame(t_ns, displacement)
 
     # -- raw signals (``ServesRawSignals``): the last frame read, as it is ---------------------------
@@ -402,6 +405,10 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             return self._base_ns + int(round(float(t_s) * 1e9))
         if t_s is not None and not getattr(reader, "realtime", True):
             return self._wall0_ns + int(round(float(t_s) * 1e9))
+        captured_s = getattr(reader, "captured_s", None)
+        if captured_s is not None:  # when the frame was taken, not when a busy thread read it
+            t_ns = self._wall0_ns + int(round(float(captured_s) * 1e9)) - self._mono0_ns
+            return max(t_ns, self._last_t_ns + 1)
         return self._wall0_ns + time.monotonic_ns() - self._mono0_ns
 
     # -- event-loop side ---------------------------------------------------------

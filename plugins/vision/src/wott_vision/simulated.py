@@ -31,7 +31,10 @@ class SimulatedSource:
     otherwise frames come as fast as they are read, still 1 / fps apart in
     scene time. A scene that does not loop ends: ``read()`` then returns
     ``(False, None)``, ``ended`` is true and ``failure`` says so. ``t_s`` and
-    ``truth`` describe the frame last read.
+    ``truth`` describe the frame last read; in real time, ``captured_s`` is the
+    monotonic instant it was due (its exposure, as a camera's buffer timestamp
+    says), not when a busy reader got round to it: the driver stamps the frame
+    with that, so a late read does not move the frame in time.
     """
 
     def __init__(self, simulator: Simulator, fps: float, *, realtime: bool = True) -> None:
@@ -44,6 +47,7 @@ class SimulatedSource:
         self.ended = False
         self.failure = ""
         self.t_s = 0.0
+        self.captured_s: float | None = None  # monotonic s the frame last read was due (real time only)
         self.truth: np.ndarray | None = None
         self._k = 0  # index of the next frame (ahead of frames_read once frames were skipped)
         self._t0: float | None = None
@@ -72,6 +76,8 @@ class SimulatedSource:
             return False, None
         images, truth = self.simulator.render(t_s)
         self.t_s, self.truth = t_s, truth
+        if self._t0 is not None:
+            self.captured_s = self._t0 + self._k / self.fps
         self._k += 1
         self.frames_read += 1
         return True, images

@@ -12,6 +12,7 @@ from wott_hub.plugin_api import (
     Driver,
     FamilyInfo,
     Meta,
+    UsbMatch,
     hookimpl,
     naming_device,
     read_settings,
@@ -52,6 +53,22 @@ def wott_hub_families() -> list[FamilyInfo]:
         "raw counts (shear and normal) and, when the server is calibrated, forces in N.",
         XelaSettings,
     )]
+
+
+# XELA's sensors are read by xela_server over CAN; the hub reaches them through the server's
+# WebSocket (url), never the USB device. The CAN adapter is listed so a user sees it is there:
+# XELA ships an slcan adapter (VScom USB-CAN Plus, per yan-galaxy/xela_server_ros's udev rules),
+# an FTDI-based serial device; its own product id was not found in the sources read, so the FTDI
+# FT232R's default id (0403:6001) is what is listed. Not tried on a device.
+USB_MATCHES = (
+    UsbMatch(FAMILY, "tty", "FTDI USB-serial, as XELA's slcan CAN adapter (listed: xela is reached "
+             "through xela_server's url)", vendor_id="0403", product_ids=("6001",)),
+)
+
+
+@hookimpl
+def wott_hub_usb_devices() -> list[UsbMatch]:
+    return list(USB_MATCHES)
 
 
 @hookimpl

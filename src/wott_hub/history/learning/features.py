@@ -36,6 +36,8 @@ from wott_hub.robotics.payloads import contacts, skin_packet
 from wott_hub.robotics.raw_signals import DISPLACEMENT_EVENT, displacement
 from wott_hub.td.raw import PRESSURE_GRID_RECORDED, RAW_IMAGE_RECORDED
 
+from .packets import contact_blocks
+
 if TYPE_CHECKING:
     from wott_hub.events.record import Record
     from wott_hub.robotics.geometry import SkinGeometry
@@ -194,6 +196,26 @@ class ContactsSource(Source):
                 Feature(f"{p}.contact_force", "float32", (3,), names=["x", "y", "z"], info={"unit": "N"}),
             ],
         )
+
+    def decode_many(self, recs: list[Record]) -> list[np.ndarray]:
+        fast = contact_blocks([r.data for r in recs])
+        if fast is None:
+            return super().decode_many(recs)
+        counts, loc, force = fast
+        sample = np.repeat(np.arange(len(recs)), counts)
+        weight = np.linalg.norm(force, axis=1)
+        total = np.bincount(sample, weight, minlength=len(recs))
+        unweighted = ~(total > 0)  # no force measured (or NaN): each contact counts once
+        weight[unweighted[sample]] = 1.0
+        total = np.bincount(sample, weight, minlength=len(recs))
+        centroid = np.zeros((len(recs), 3))
+        net = np.zeros((len(recs), 3))
+        for axis in range(3):
+            centroid[:, axis] = np.bincount(sample, loc[:, axis] * weight, minlength=len(recs))
+            net[:, axis] = np.bincount(sample, force[:, axis], minlength=len(recs))
+        touched = counts > 0
+        centroid[touched] /= total[touched, None]
+        return [counts[:, None], centroid.astype(np.float32), net.astype(np.float32)]
 
     def decode(self, rec: Record) -> list[np.ndarray]:
         c = contacts(rec.data)

@@ -147,7 +147,7 @@ class LeRobotWriter:
             path = self.root / data_path(self.chunk, self.index)
             self._data_frames = 0
         path.parent.mkdir(parents=True, exist_ok=True)
-        self._data = pq.ParquetWriter(path, self.schema, compression="snappy", use_dictionary=True)
+        self._data = pq.ParquetWriter(path, self.schema, compression="snappy", use_dictionary=False)
 
     # --- the end ------------------------------------------------------------------------------
 
