@@ -3,7 +3,7 @@
 ``python -m wott_hub.config_docs > docs/configuration.md`` writes it;
 tests/test_config_bounds.py fails when the committed page differs from what this module
 renders from ``wott_hub.config.config_schema()`` and from the settings models of the
-first-party device families (``FIRST_PARTY``: the built-in ones and the five plugins of
+first-party device families (``FIRST_PARTY``: the built-in ones and the six plugins of
 ``plugins/``). Each family gets the table of its settings (``settings_rows``: nested tables
 flattened to ``optics.focal_px``, what ``wott-hub plugins families NAME`` prints too), the
 rules across settings its schema states, and a complete ``[[device]]`` example
@@ -23,7 +23,7 @@ from wott_hub.config import config_schema
 
 __all__ = ["DEVICE_EXAMPLES", "FIRST_PARTY", "SettingRow", "family_rules", "render", "settings_rows"]
 
-FIRST_PARTY = ("builtin", "barrel", "flatpad", "taxel", "anyskin", "xela")
+FIRST_PARTY = ("builtin", "barrel", "flatpad", "taxel", "anyskin", "xela", "gel")
 """The plugins whose families the page documents: the hub's own and those of ``plugins/``."""
 
 DEVICE_EXAMPLES: dict[str, str] = {
@@ -116,6 +116,22 @@ url = "ws://127.0.0.1:5000"
 position = 1
 model = "uSPa46"
 forces = false                    # true: the server's calibrated forces, N
+''',
+    "gelsight-mini": '''\
+[[device]]
+id = "mini-left"
+family = "gelsight-mini"          # a GelSight Mini (docs/gel.md)
+source = "sessions/mini.avi"      # a recording; or device = "/dev/video2", or serial = "28F5K4RR"
+realtime = false                  # as fast as processed
+rest_frames = 5
+''',
+    "digit": '''\
+[[device]]
+id = "digit-right"
+family = "digit"                  # a DIGIT (docs/gel.md)
+serial = "D20001"                 # its /dev/videoN found through udev (not tried on hardware)
+stream = "QVGA60"
+led = [15, 15, 15]
 ''',
 }
 """A complete ``[[device]]`` table per first-party family, as docs/configuration.md shows it."""

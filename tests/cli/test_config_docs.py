@@ -32,7 +32,7 @@ def test_every_first_party_family_has_a_settings_table_and_an_example():
 
     families = {f.name for f in get_registry().families().values() if f.plugin in FIRST_PARTY}
     assert families == {"scene", "wot-remote", "barrel-vision", "flat-vision", "taxel-array", "anyskin",
-                        "xela"}
+                        "xela", "gelsight-mini", "digit"}
     assert set(_examples()) == families
     text = PAGE.read_text()
     for key in ("`kpa_per_count`", "`optics.focal_px`", "`cameras.f_px`", "`idle_timeout_s`", "`rate_hz`"):

@@ -19,7 +19,7 @@ from wott_hub.history.batch_writer import RESERVE, BatchWriter
 from wott_hub.history.forward import StoreAndForward
 from wott_hub.history.lease import Lease
 from wott_hub.history.record_queue import RecordQueue, record_bytes
-from wott_hub.history.retention import Retention
+from wott_hub.history.retention import Retention, RetentionClock
 from wott_hub.history.spool import Spool
 from wott_hub.history.tally import Tally
 from wott_hub.history.writer_loop import WriterLoop
@@ -211,7 +211,8 @@ def test_a_lease_lost_gives_up_the_queue_counting_and_telling_each_record(engine
     p = _pieces(engine)
     start = _register(p, "d")
     loop = WriterLoop(p.storage, p.queue, p.tally, p.batches, p.forward, p.storage.state, interval_s=0.01,
-                      spill_after_s=2.0, retention=Retention())
+                      spill_after_s=2.0, retention=Retention(),
+                      retention_clock=RetentionClock(Retention(), engine))
     for r in _recs("d", start, 10):
         p.queue.offer(r)
     loop.keep_lease()  # held, not due

@@ -21,9 +21,9 @@ def documented_hooks() -> list[str]:
     return re.findall(r"^### `?(wott_hub_\w+)\(", DOC.read_text(), flags=re.MULTILINE)
 
 
-def test_there_are_hooks_for_families_opening_demo_devices_claiming_and_usb_devices():
+def test_there_are_hooks_for_families_opening_demo_devices_claiming_usb_devices_and_calibrating():
     assert set(hook_specs()) == {"wott_hub_families", "wott_hub_open_device", "wott_hub_demo_devices",
-                                 "wott_hub_claim_td", "wott_hub_usb_devices"}
+                                 "wott_hub_claim_td", "wott_hub_usb_devices", "wott_hub_calibrate"}
 
 
 def test_every_hook_is_documented_in_docs_plugins_md():

@@ -100,3 +100,24 @@ def test_a_usb_match_that_can_never_match_or_raises_is_an_error_of_its_plugin():
         assert said in info.error, info.error
     (bomb,) = [p for p in reg.plugins() if p.name == "bomb"]  # a plugin that raises: its own error only
     assert bomb.error is not None and "wott_hub_usb_devices: raised RuntimeError: usb exploded" in bomb.error
+
+
+def test_hook_wott_hub_calibrate(tmp_path):
+    """The gel plugin's depth calibration from Taxim's real Mini ball presses; a family without one, an
+    unknown option and missing data are each one refusal saying which."""
+    from importlib import resources
+
+    from wott_hub.errors import SettingsError
+
+    registry = Registry(only=["gel", "flatpad"])
+    with resources.as_file(resources.files("taxim") / "calib" / "gelsight_mini" / "dataPack.npz") as data:
+        summary = registry.calibrate("gelsight-mini", str(data), str(tmp_path / "d.npz"),
+                                     {"ball_diameter_mm": "4"})
+        assert summary.startswith(f"wrote {tmp_path / 'd.npz'}") and "24 presses of a 4 mm ball" in summary
+        with pytest.raises(SettingsError, match="--option colour: unknown"):
+            registry.calibrate("gelsight-mini", str(data), str(tmp_path / "e.npz"), {"colour": "red"})
+    with pytest.raises(SettingsError, match="has no calibration"):
+        registry.calibrate("flat-vision", "x", str(tmp_path / "f.npz"), {})
+    with pytest.raises(SettingsError, match="not a ball-press pack"):
+        registry.calibrate("digit", str(tmp_path / "missing.npz"), str(tmp_path / "g.npz"),
+                           {"ball_diameter_mm": "4"})

@@ -50,6 +50,25 @@ def test_grid_that_does_not_fit_the_image_is_refused():
         PadLayout(16, 16, pitch_mm=2.0)
 
 
+def test_a_grid_that_fits_the_view_but_not_the_margin_says_so():
+    """Issue 44: "spans 16.5 x 13.2 mm but the camera sees 18.9 x 14.2 mm" read as a contradiction."""
+    with pytest.raises(ValueError) as e:
+        PadLayout(9, 11, pitch_mm=1.65, optics=PadOptics(focal_px=33.9 * PadOptics().z_eff_mm))
+    text = str(e.value)
+    assert "spans 16.5 x 13.2 mm" in text and "camera sees 18.9 x 14.2 mm" in text
+    assert "may use 17.3 x 12.6 mm" in text and "between a marker and the image's edge" in text
+
+
+def test_mm_per_px_sets_the_scale():
+    from wott_driver_flatpad.settings import PadSettings, layout_from
+
+    from wott_hub.plugin_api import read_settings
+
+    s = read_settings(PadSettings, {"rows": 9, "cols": 11, "pitch_mm": 1.2, "mm_per_px": 0.0295})
+    lay = layout_from(s)
+    assert lay.optics.px_per_mm == pytest.approx(1 / 0.0295)
+
+
 def test_marker_too_big_for_pitch_is_refused():
     with pytest.raises(ValueError, match="marker_radius_mm"):
         PadLayout(pitch_mm=1.5, marker_radius_mm=0.6)

@@ -21,7 +21,21 @@ from typer.core import TyperGroup
 if TYPE_CHECKING:
     from typer import _click  # typer vendors click: TyperGroup.invoke takes its (unexported) Context
 
-from . import bench, config, devices, directory, discover, episode, history, plugins, replay, run, td, tokens
+from . import (
+    bench,
+    calibrate,
+    config,
+    devices,
+    directory,
+    discover,
+    episode,
+    history,
+    plugins,
+    replay,
+    run,
+    td,
+    tokens,
+)
 
 __all__ = ["app", "main"]
 
@@ -93,6 +107,7 @@ app.add_typer(devices.app, name="devices")
 app.registered_commands += discover.app.registered_commands
 app.add_typer(plugins.app, name="plugins")
 app.registered_commands += bench.app.registered_commands
+app.registered_commands += calibrate.app.registered_commands
 app.registered_commands += run.app.registered_commands
 app.add_typer(config.app, name="config")
 app.add_typer(history.app, name="history")

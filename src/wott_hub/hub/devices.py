@@ -19,7 +19,7 @@ from wott_hub.errors import Conflict
 from wott_hub.plugins.model import check_device_id
 from wott_hub.runtime.capabilities import action_names
 from wott_hub.runtime.opening import CLOSE_TIMEOUT_S, open_driver
-from wott_hub.runtime.pipeline import CONTACTS, UNAVAILABLE, DevicePipeline
+from wott_hub.runtime.pipeline import CONTACTS, UNAVAILABLE, DevicePipeline, initial_contacts
 from wott_hub.runtime.raw import RawRecorder, RawSource
 from wott_hub.servient import ServedThing, clean_td
 from wott_hub.td.builder import build_tactile_td, static_property_values
@@ -130,7 +130,8 @@ class Devices:
         record = dcfg.id not in self.config.history_skip
         if self.pool is not None:  # opened in a worker process: its frames are processed there
             proxy, _family = await self.pool.open(dcfg)
-            return await self._add(proxy.description, DevicePipeline(dcfg.id, proxy, None), proxy,
+            pipeline = DevicePipeline(dcfg.id, proxy, None, initial_contacts(proxy.description))
+            return await self._add(proxy.description, pipeline, proxy,
                                    family=dcfg.family, record=record, run=run, config=dcfg)
         # open + prepare (e.g. a network device's mesh, read before its TD can be built), isolated
         driver = await open_driver(dcfg)

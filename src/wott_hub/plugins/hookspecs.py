@@ -97,3 +97,16 @@ def wott_hub_usb_devices() -> list[UsbMatch]:
     may name a family no installed plugin provides (the device is then listed, never adopted); a
     declaration that can never match is an error of the plugin. Keep it cheap: no I/O here.
     """
+
+
+@hookspec(firstresult=True)
+def wott_hub_calibrate(family: str, data: str, out: str, options: dict[str, str]) -> str | None:
+    """Calibrate devices of a family from recorded data, and write the calibration to a file.
+
+    Called by ``Registry.calibrate`` (``wott-hub calibrate FAMILY DATA --out OUT [--option KEY=VALUE]``)
+    for the plugin that provides ``family`` only. ``data`` is the path the user gave (its format is
+    the family's, documented with it), ``out`` where to write, ``options`` the ``--option`` pairs as
+    strings. Return a one-line summary of what was written (the command prints it). Raise
+    ``SettingsError`` naming the option, or saying what is wrong with the data, when it cannot be
+    done (the command prints it as one line). A family without a calibration does not implement it.
+    """

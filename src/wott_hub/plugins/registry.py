@@ -288,6 +288,31 @@ class Registry:
             raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} {msg}")
         return driver
 
+    def calibrate(self, family: str, data: str, out: str, options: dict[str, str]) -> str:
+        """Calibrate ``family`` from ``data`` into ``out`` through its plugin (``wott_hub_calibrate``): the
+        plugin's one-line summary. ``SettingsError`` for an unknown family or one without a calibration;
+        a plugin's ``DriverError`` (a ``SettingsError`` too) passes through, anything else is its bug."""
+        families = self.families()
+        if family not in families:
+            raise SettingsError(f"family {family!r} is not installed (wott-hub plugins families)")
+        plugin = families[family].plugin
+        hook = "wott_hub_calibrate"
+        rec = self._records[plugin]
+        if not any(impl.plugin is rec.plugin for impl in getattr(self.pm.hook, hook).get_hookimpls()):
+            raise SettingsError(f"family {family!r} has no calibration (plugin {plugin!r})")
+        res = attempt(f"{hook}()", self._caller(hook, rec.plugin, plugin), family=family, data=data, out=out,
+                      options=dict(options))
+        if res.fault is not None:
+            if isinstance(res.fault.error, DriverError):
+                raise res.fault.error
+            msg = f"raised {res.fault.detail}"
+            self._record_error(plugin, hook, msg, res.fault)
+            raise DriverError(f"calibrate {family!r}: plugin {plugin!r} {msg}") from res.fault.error
+        if not isinstance(res.value, str):
+            raise DriverError(f"calibrate {family!r}: plugin {plugin!r} returned {type(res.value).__name__}, "
+                              "not a summary")
+        return res.value
+
     def demo_devices(self) -> list[DeviceConfig]:
         """Each plugin's simulated demo devices, for ``wott-hub run`` without a config."""
         hook = "wott_hub_demo_devices"

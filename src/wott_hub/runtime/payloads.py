@@ -79,6 +79,9 @@ def contacts_json(res: FrameResult) -> str:
     if "n" in where or "n" in force:  # "nan"/"inf": the only letters besides x, y, z there
         raise ValueError("Out of range float values are not JSON compliant")  # as encode() says
     ids = f',"contactIds":[{",".join([str(c.id) for c in contacts])}]' if contacts else ""
+    if res.radii:  # a device that measures its contacts (tactile.measured)
+        radii = ",".join([repr(round(c.radius, 4)) for c in contacts])
+        ids = f',"contactRadii":[{radii}]{ids}'
     return f'{{"numOfContacts":{len(contacts)},"contactLocations":[{where}],"contactForces":[{force}]{ids}}}'
 
 

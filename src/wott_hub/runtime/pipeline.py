@@ -59,12 +59,14 @@ from .opening import CLOSE_TIMEOUT_S, restart_backoff
 from .payloads import contacts_json, displacement_rows, skin_deformed_json
 
 if TYPE_CHECKING:
+    from wott_hub.tactile import DeviceDescription
     from wott_hub.types import RecordSink
 
     from .handle import DeviceHandle
 
 __all__ = ["ACTION", "CONTACTS", "NO_CONTACTS", "NO_UNAVAILABLE", "RESTARTED", "SKIN_DEFORMED",
-           "SKIN_DISPLACEMENT", "UNAVAILABLE", "DevicePipeline", "Report", "tune_processor"]
+           "SKIN_DISPLACEMENT", "UNAVAILABLE", "UNKNOWN_CONTACTS", "DevicePipeline", "Report",
+           "initial_contacts", "tune_processor"]
 
 log = logging.getLogger("wott_hub.hub")
 
@@ -76,6 +78,10 @@ UNAVAILABLE = "unavailableNodes"  # a vision skin's nodes of unknown value (issu
 
 NO_CONTACTS = encode({"numOfContacts": 0, "contactLocations": [], "contactForces": []})
 """The contacts property before any frame: nothing touches the skin."""
+
+UNKNOWN_CONTACTS = "null"
+"""The contacts property of a device that measures its contacts (``measures_contacts``) before its first
+frame with a reference: unknown, not "no contact" (issue 44)."""
 
 NO_UNAVAILABLE = encode({"numOfUnavailableNodes": 0, "arrayOfUnavailableNodes": []})
 """The unavailable-nodes property of a skin that reads every node (and of any before its rest frame)."""
@@ -103,6 +109,12 @@ def tune_processor(processor: FrameProcessor, driver: DeviceHandle) -> None:
     (``NoisyAtRest``: the camera skins)."""
     if isinstance(driver, NoisyAtRest):
         processor.set_below_threshold(float(driver.below_threshold_floor), float(driver.below_threshold_s))
+
+
+def initial_contacts(desc: DeviceDescription) -> str:
+    """The contacts property before the device's first frame: unknown for a device that measures its
+    contacts (its first frame needs a rest reference), else no contact."""
+    return UNKNOWN_CONTACTS if desc.measures_contacts else NO_CONTACTS
 
 
 def _health_of(driver: DeviceHandle) -> tuple[str, str]:
@@ -142,7 +154,7 @@ class DevicePipeline:
     @classmethod
     def of_driver(cls, thing: str, driver: Driver) -> DevicePipeline:
         """The pipeline of a driver opened in this process, with a processor made for its description."""
-        return cls(thing, driver, _processor_for(driver))
+        return cls(thing, driver, _processor_for(driver), initial_contacts(driver.description))
 
     def _tune(self, driver: DeviceHandle, processor: FrameProcessor) -> None:
         tune_processor(processor, driver)
@@ -341,7 +353,8 @@ class DevicePipeline:
         if res.actions and wants(thing, KIND_EVENT, ACTION_DETAILS):
             for details in res.action_details():
                 put(Record(thing, 0, KIND_EVENT, ACTION_DETAILS, t_ns, encode(details)))
-        if res.contacts or self.had_contacts:  # the value changes while touched and once at rest
+        # the value changes while touched and once at rest; a measuring device's first frame ends "unknown"
+        if res.contacts or self.had_contacts or (res.radii and self.contacts is None):
             self.had_contacts = bool(res.contacts)
             self.contacts = res
             if wants(thing, KIND_PROPERTY, CONTACTS):

@@ -123,7 +123,8 @@ def encode_sample(signal: RawSignal, sample: RawSample, fmt: str, device: str = 
                            "vectors": xyz}, separators=(",", ":")).encode()
     rows, cols = grid.shape
     values = np.round(grid, 3).tolist()
-    return json.dumps({"timeStamp": sample.t_ns, "rows": rows, "cols": cols, "pressure": values},
+    key = "depth" if signal.term == "depthMap" else "pressure"  # td.raw: a depth map's cells are depths
+    return json.dumps({"timeStamp": sample.t_ns, "rows": rows, "cols": cols, key: values},
                       separators=(",", ":")).encode()
 
 

@@ -6,6 +6,7 @@ from .contacts import Contact, WinklerForceModel, find_contacts
 from .device import CoordinateFrame, DeviceDescription, NodeSignal, SkinShape
 from .frame import FrameError, TactileFrame
 from .materials import MATERIALS, Material, MaterialError, shore_to_modulus_mpa
+from .measured import MeasuredContact
 from .mesh import (
     MeshError,
     SkinMesh,
@@ -20,7 +21,7 @@ from .processing import FrameProcessor, FrameResult, ProcessingParams
 __all__ = [
     "ACTIONS", "ActionDetector", "ActionParams", "Contact", "CoordinateFrame", "DeviceDescription",
     "FrameError", "FrameProcessor", "FrameResult", "MATERIALS", "Material", "MaterialError",
-    "MeshError", "NodeSignal", "ProcessingParams", "SkinMesh", "SkinShape", "TactileFrame",
+    "MeasuredContact", "MeshError", "NodeSignal", "ProcessingParams", "SkinMesh", "SkinShape", "TactileFrame",
     "WinklerForceModel", "barrel", "cylinder", "find_contacts", "flat_pad", "load_taclink_barrel",
     "shore_to_modulus_mpa", "taclink_barrel",
 ]

@@ -50,6 +50,7 @@ class Contact:
     base: float = 0.0  # mm
     id: int = 0
     xyz: tuple[float, float, float] = _UNSET  # the location as Python floats (tracking, actions)
+    radius: float = 0.0  # mm, measured by the driver (tactile.measured); 0: not measured
 
     def __post_init__(self) -> None:
         if self.xyz is _UNSET:

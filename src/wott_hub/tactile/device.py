@@ -79,6 +79,9 @@ class DeviceDescription:
     lobes; 0 for a device that measures each node directly). Processing drops
     contacts weaker than that beside a stronger one (docs/processing.md). ``node_signal``: what the
     frames' node vectors measure; ``epsilon_mm`` is in its unit (mm for the default displacement).
+    ``measures_contacts``: the driver measures its contacts itself, with their radii
+    (``TactileFrame.contacts``, ``tactile.measured``): the TD declares ``contactRadii`` and
+    ``contactInformation`` is unknown (null) until the driver's first frame with a reference.
     """
 
     id: str
@@ -93,3 +96,4 @@ class DeviceDescription:
     description: str = ""
     side_lobe_ratio: float = 0.0
     node_signal: NodeSignal = DISPLACEMENT
+    measures_contacts: bool = False

@@ -8,6 +8,8 @@ import numpy as np
 
 from wott_hub.errors import InvalidInput
 
+from .measured import MeasuredContact
+
 __all__ = ["FrameError", "TactileFrame"]
 
 _INTEGER = (int, np.integer)
@@ -24,11 +26,16 @@ class TactileFrame:
     Validation happens here, at the boundary, so nothing downstream ever sees
     NaN/Inf: a driver whose model diverges gets a clear error instead of a
     client receiving garbage.
+
+    ``contacts``: the contacts a driver measured itself (``tactile.measured``; None: the hub
+    finds them in the displacement field, as for every skin that does not declare
+    ``measures_contacts``).
     """
 
     t_ns: int
     displacement: np.ndarray
     pressure: np.ndarray | None = None
+    contacts: tuple[MeasuredContact, ...] | None = None
 
     def __post_init__(self) -> None:
         t = self.t_ns
@@ -53,6 +60,11 @@ class TactileFrame:
             if not np.isfinite(p).all():
                 raise FrameError("pressure has NaN/Inf values")
             object.__setattr__(self, "pressure", p)
+        if self.contacts is not None:
+            if not all(isinstance(c, MeasuredContact) for c in self.contacts):
+                raise FrameError("contacts must be MeasuredContact values")
+            if type(self.contacts) is not tuple:
+                object.__setattr__(self, "contacts", tuple(self.contacts))
 
     @property
     def n_nodes(self) -> int:

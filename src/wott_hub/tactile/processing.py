@@ -25,6 +25,7 @@ import numpy as np
 from .actions import ActionDetector, ActionEvidence, ActionParams
 from .contacts import Contact, ContactFinder, ForceModel, WinklerForceModel
 from .frame import FrameError, TactileFrame
+from .measured import MeasuredContact
 from .mesh import SkinMesh, mesh_spacing
 from .tracking import ContactTracker
 
@@ -60,6 +61,7 @@ class ProcessingParams:
     birth_noise: float = 1.0  # a new contact's peak rises this many noise floors above its base
     side_lobe_ratio: float = 0.0  # contacts weaker than this fraction of the strongest: artefacts
     track_gate_mm: float | None = None  # None: 3 mesh spacings
+    measured_contacts: bool = False  # the driver measures contacts and their radii (tactile.measured)
 
 
 def processing_params(desc: DeviceDescription) -> ProcessingParams:
@@ -72,7 +74,8 @@ def processing_params(desc: DeviceDescription) -> ProcessingParams:
         extra = {"force_model": "sum" if signal.gives_force else "none", "unit": signal.unit,
                  "actions": ActionParams(collision_speed_mm_s=math.inf)}
     return ProcessingParams(epsilon_mm=desc.epsilon_mm, modulus_mpa=desc.material.modulus_mpa,
-                            thickness_mm=desc.thickness_mm, side_lobe_ratio=desc.side_lobe_ratio, **extra)
+                            thickness_mm=desc.thickness_mm, side_lobe_ratio=desc.side_lobe_ratio,
+                            measured_contacts=desc.measures_contacts, **extra)
 
 
 @dataclass(slots=True, eq=False)
@@ -92,6 +95,7 @@ class FrameResult:
     packet_due: bool
     details: tuple[ActionEvidence, ...] = ()  # one per action, same order
     forces: bool = True  # the contacts' forces are measured or modelled (False: contactForces is empty)
+    radii: bool = False  # the contacts were measured with their radii: ``contactRadii`` (tactile.measured)
 
     def action_details(self) -> list[dict[str, Any]]:
         """The ``actionDetails`` event payloads of this frame's actions (built only when asked)."""
@@ -122,6 +126,8 @@ class FrameResult:
             "contactLocations": [_xyz(c.location) for c in self.contacts],
             "contactForces": [_xyz(c.force) for c in self.contacts] if self.forces else [],
         }
+        if self.radii:
+            info["contactRadii"] = [round(c.radius, 4) for c in self.contacts]
         if self.contacts:
             info["contactIds"] = [c.id for c in self.contacts]
         return info
@@ -226,10 +232,27 @@ class FrameProcessor:
             if is_release:
                 deformed, self._prev_deformed = self._prev_deformed, deformed
             intensity = np.zeros(len(deformed))
+        if self.params.measured_contacts:  # the driver's own contacts, not the field's
+            contacts = self._measured(t_ns, frame.contacts or ())
         actions = self._actions.update(t_ns, contacts)
         details = tuple(self._actions.details) if actions else ()
         return FrameResult(t_ns, deformed, intensity, is_release, contacts, actions, due, details,
-                           self._forces)
+                           self._forces, self.params.measured_contacts)
+
+    def _measured(self, t_ns: int, measured: tuple[MeasuredContact, ...]) -> list[Contact]:
+        """The driver's measured contacts as ``Contact`` values, tracked (ids) like any other; every one
+        is kept (it was measured, not inferred from a noisy field: no birth threshold, no side lobes)."""
+        if not measured:
+            self._tracker.reset()
+            return []
+        empty = np.empty(0, dtype=np.int64)
+        contacts = []
+        for m in measured:
+            loc = np.asarray(m.location, dtype=np.float64)
+            force = np.asarray(m.force_n, dtype=np.float64)
+            contacts.append(Contact(empty, loc, force, m.depth_mm, m.depth_mm, np.zeros(3), m.depth_mm,
+                                    math.pi * m.radius_mm**2, 0.0, radius=m.radius_mm))
+        return self._tracker.update(t_ns, contacts, -math.inf, 0.0)
 
     def _round(self, norms: np.ndarray) -> np.ndarray:
         """``np.round(norms, decimals)`` as the three ufuncs it runs, without its call overhead."""

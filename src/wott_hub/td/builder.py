@@ -16,7 +16,7 @@ from .actions import declared_actions
 from .defaults import state_defaults
 from .forms import FormLayout
 from .raw import raw_affordances, raw_events
-from .vocabulary import EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
+from .vocabulary import CONTACT_RADII, EVENTS, PROPERTIES, TACTILE_NS, TD_CONTEXT
 
 __all__ = ["build_tactile_td", "static_property_values", "tactile_context"]
 
@@ -88,7 +88,18 @@ def build_tactile_td(
         td["actions"] = declared
     if not desc.node_signal.is_displacement:
         _node_signal(td, desc.node_signal)
+    if desc.measures_contacts:
+        _measured_contacts(td)
     return state_defaults(td)
+
+
+def _measured_contacts(td: dict[str, Any]) -> None:
+    """A device that measures its contacts (``DeviceDescription.measures_contacts``): their radii beside
+    their locations, and the value unknown (null) until its first frame with a rest reference."""
+    info = td["properties"]["contactInformation"]
+    info["description"] = (f"{info['description']} Measured by the device itself, with each contact's "
+                           "radius; null (unknown) until its first frame with a rest reference.")
+    info["properties"]["contactRadii"] = copy.deepcopy(CONTACT_RADII)
 
 
 def _node_signal(td: dict[str, Any], signal: NodeSignal) -> None:
@@ -152,6 +163,7 @@ def static_property_values(desc: DeviceDescription) -> dict[str, Any]:
             "originLocation": {"originName": f.origin_name, **pt(f.origin)},
             "axisOrientation": {"xAxis": pt(f.x_axis), "yAxis": pt(f.y_axis), "zAxis": pt(f.z_axis)},
         },
-        "contactInformation": {"numOfContacts": 0, "contactLocations": [], "contactForces": []},
+        "contactInformation": (None if desc.measures_contacts else
+                               {"numOfContacts": 0, "contactLocations": [], "contactForces": []}),
         "unavailableNodes": {"numOfUnavailableNodes": 0, "arrayOfUnavailableNodes": []},  # served live
     }

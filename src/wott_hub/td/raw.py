@@ -24,12 +24,13 @@ from typing import Any
 
 from wott_hub.tactile.raw import GRID, IMAGE, VECTOR_TERMS, RawSignal
 
-__all__ = ["DEFAULT_RATE_HZ", "MAX_RATE_HZ", "PRESSURE_GRID", "PRESSURE_GRID_RECORDED", "RAW_IMAGE",
-           "RAW_IMAGE_RECORDED", "RAW_PROPERTIES", "RAW_TYPES", "raw_affordances", "raw_events",
+__all__ = ["DEFAULT_RATE_HZ", "DEPTH_MAP", "MAX_RATE_HZ", "PRESSURE_GRID", "PRESSURE_GRID_RECORDED",
+           "RAW_IMAGE", "RAW_IMAGE_RECORDED", "RAW_PROPERTIES", "RAW_TYPES", "raw_affordances", "raw_events",
            "raw_property"]
 
 RAW_IMAGE = "rawImage"
 PRESSURE_GRID = "pressureGrid"
+DEPTH_MAP = "depthMap"
 RAW_IMAGE_RECORDED = "rawImageRecorded"
 PRESSURE_GRID_RECORDED = "pressureGridRecorded"
 _VECTORS = {  # term -> (@type, what its vectors are)
@@ -38,8 +39,9 @@ _VECTORS = {  # term -> (@type, what its vectors are)
     "taxelForce": ("tac:TaxelForce", "the force on each 3-axis taxel, as its maker's calibration gives it"),
 }
 assert tuple(_VECTORS) == VECTOR_TERMS
-RAW_PROPERTIES = frozenset({RAW_IMAGE, PRESSURE_GRID, *VECTOR_TERMS})
-RAW_TYPES = frozenset({"tac:RawImage", "tac:PressureGrid", *(t for t, _ in _VECTORS.values())})
+RAW_PROPERTIES = frozenset({RAW_IMAGE, PRESSURE_GRID, DEPTH_MAP, *VECTOR_TERMS})
+RAW_TYPES = frozenset({"tac:RawImage", "tac:PressureGrid", "tac:DepthMap",
+                       *(t for t, _ in _VECTORS.values())})
 """The ``@type`` of a raw-signal property: live only (a replay's TD leaves them out)."""
 
 MAX_RATE_HZ = 120.0
@@ -80,7 +82,9 @@ def _image(cameras: list[RawSignal]) -> dict[str, Any]:
 
 def raw_property(signal: RawSignal) -> str:
     """The property that serves ``signal``."""
-    return {IMAGE: RAW_IMAGE, GRID: PRESSURE_GRID}.get(signal.kind, signal.term)
+    if signal.kind == GRID:
+        return signal.term or PRESSURE_GRID
+    return {IMAGE: RAW_IMAGE}.get(signal.kind, signal.term)
 
 
 def _which(signals: list[RawSignal]) -> dict[str, Any]:
@@ -115,6 +119,20 @@ def _grid(grids: list[RawSignal]) -> dict[str, Any]:
     }
 
 
+def _depth_map(grids: list[RawSignal]) -> dict[str, Any]:
+    """A gel's depth map (``term`` ``depthMap``): ``pressureGrid``'s form, its cells the indentation."""
+    aff = _grid(grids)
+    rows, cols = grids[0].shape if len(grids[0].shape) == 2 else (0, 0)
+    aff["@type"], aff["title"] = "tac:DepthMap", DEPTH_MAP
+    aff["description"] = (f"The latest {rows} x {cols} depth map of the gel (its indentation, mm; rows along "
+                          "y, from the view's corner), from its depth calibration; read when asked: JSON, "
+                          "NumPy .npy (float32 rows x cols) or an SSE stream at maxRate.")
+    props = aff["properties"]
+    props["depth"] = props.pop("pressure")
+    aff["required"] = ["timeStamp", "rows", "cols", "depth"]
+    return aff
+
+
 def _vectors(term: str, signals: list[RawSignal]) -> dict[str, Any]:
     first = signals[0]
     n = first.shape[0] if first.shape else 0
@@ -145,11 +163,14 @@ def raw_affordances(signals: tuple[RawSignal, ...]) -> dict[str, dict[str, Any]]
     """The raw-signal properties of a device with these signals (no forms yet: ``td.forms`` writes them)."""
     out: dict[str, dict[str, Any]] = {}
     cameras = [s for s in signals if s.kind == IMAGE]
-    grids = [s for s in signals if s.kind == GRID]
+    grids = [s for s in signals if s.kind == GRID and not s.term]
+    depth = [s for s in signals if s.kind == GRID and s.term == DEPTH_MAP]
     if cameras:
         out[RAW_IMAGE] = _image(cameras)
     if grids:
         out[PRESSURE_GRID] = _grid(grids)
+    if depth:
+        out[DEPTH_MAP] = _depth_map(depth)
     for term in VECTOR_TERMS:
         vectors = [s for s in signals if s.term == term]
         if vectors:
@@ -181,7 +202,7 @@ def raw_events(signals: tuple[RawSignal, ...]) -> dict[str, dict[str, Any]]:
                 "required": ["timeStamp", "camera", "image"],
             },
         }
-    grids = [s for s in signals if s.kind == GRID and s.record_hz > 0]
+    grids = [s for s in signals if s.kind == GRID and not s.term and s.record_hz > 0]
     if grids:
         schema = _grid(grids)
         out[PRESSURE_GRID_RECORDED] = {

@@ -16,7 +16,8 @@ from wott_hub.tactile.actions import ACTIONS
 
 from .actions import DEVICE_ACTION_EVENT
 
-__all__ = ["DETAIL_EVENTS", "DETAIL_PROPERTIES", "EVENTS", "PROPERTIES", "TACTILE_NS", "TD_CONTEXT", "xyz"]
+__all__ = ["CONTACT_RADII", "DETAIL_EVENTS", "DETAIL_PROPERTIES", "EVENTS", "PROPERTIES", "TACTILE_NS",
+           "TD_CONTEXT", "xyz"]
 
 TACTILE_NS = "https://w3id.org/wott/tactile#"
 TD_CONTEXT = ["https://www.w3.org/2019/wot/td/v1", "https://www.w3.org/2022/wot/td/v1.1"]
@@ -172,6 +173,13 @@ DETAIL_PROPERTIES: dict[str, dict[str, Any]] = {
     },
 }
 PROPERTIES.update(DETAIL_PROPERTIES)
+
+CONTACT_RADII: dict[str, Any] = {
+    "type": "array", "items": {"type": "number", "minimum": 0, "unit": "mm"},
+    "description": ("Ours (issue 44), on devices that measure their contacts: each contact's radius (mm), in "
+                    "the order of contactLocations (the radius of the patch of skin it deforms)."),
+}
+"""``contactInformation.contactRadii``: declared only by devices that measure it (``measures_contacts``)."""
 for _p in PROPERTIES.values():
     _p["readOnly"] = True
 

@@ -54,12 +54,21 @@ class PadLayout:
         if (px.min(axis=0) < margin).any() or px[:, 0].max() > o.width - 1 - margin or (
             px[:, 1].max() > o.height - 1 - margin
         ):
+            # the grid may fit the view and still not the tracker's margin: say which (issue 44)
+            k = o.px_per_mm
             span = ((self.cols - 1) * self.pitch_mm, (self.rows - 1) * self.pitch_mm)
-            view = (o.width / o.px_per_mm, o.height / o.px_per_mm)
+            view = (o.width / k, o.height / k)
+            usable = ((o.width - 1 - 2 * margin) / k, (o.height - 1 - 2 * margin) / k)
+            fits = span[0] <= usable[0] and span[1] <= usable[1]
+            where = ("but it is off-centre: a marker falls within the margin (check optics.centre_mm and "
+                     "principal_px)" if fits else "too large for it")
             raise ValueError(
                 f"a {self.rows}x{self.cols} grid at {self.pitch_mm} mm spans {span[0]:.1f} x "
-                f"{span[1]:.1f} mm but the camera sees {view[0]:.1f} x {view[1]:.1f} mm "
-                f"({o.px_per_mm:.1f} px/mm): lower pitch_mm or focal_px"
+                f"{span[1]:.1f} mm; "
+                f"the camera sees {view[0]:.1f} x {view[1]:.1f} mm ({k:.1f} px/mm), of which the markers "
+                f"may use {usable[0]:.1f} x {usable[1]:.1f} mm (the tracker needs {margin:.0f} px, "
+                f"{margin / k:.2f} mm, between a marker and the image's edge): the grid is {where}; "
+                "lower pitch_mm, or see more of the pad: raise mm_per_px (lower focal_px)"
             )
 
     @property

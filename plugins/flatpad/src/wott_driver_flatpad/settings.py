@@ -106,6 +106,9 @@ class PadSettings(VisionSettings):
     parallax: Annotated[bool, Meta(description=(
         "Correct marker areas for the foreshortening of a sloped gel seen off-axis (docs/flat-pad.md); "
         "false: area ratio read as depth alone."))] = True
+    mm_per_px: Annotated[float, Meta(gt=0, le=10, description=(
+        "Image scale at the markers at rest, mm per pixel (e.g. measured with a ruler on the pad); given, "
+        "it sets optics.focal_px (focal_px = the layers' effective distance / mm_per_px)."))] | None = None
     optics: Annotated[OpticsTable, Meta(description=OpticsTable.__doc__)] = OpticsTable()
     render: Annotated[PadRenderTable, Meta(description=PadRenderTable.__doc__)] = PadRenderTable()
 
@@ -120,6 +123,9 @@ def layout_from(s: PadSettings) -> PadLayout:
         for key in ("principal_px", "centre_mm"):
             if o[key] is not None:
                 o[key] = tuple(float(v) for v in o[key])
+        if s.mm_per_px is not None:  # the scale a user can measure, instead of a focal length
+            z_eff = PadOptics(gel_mm=s.thickness_mm, **o).z_eff_mm
+            o["focal_px"] = z_eff / s.mm_per_px
         optics = PadOptics(gel_mm=s.thickness_mm, **o)
         return PadLayout(s.rows, s.cols, s.pitch_mm, s.marker_radius_mm, optics)
     except (TypeError, ValueError) as e:

@@ -46,8 +46,10 @@ not make the device impossible to remove or the hub impossible to stop. So the
 worker thread is a daemon thread of the driver's own (``_Worker``), never the event
 loop's default executor, whose threads the interpreter joins at exit; a source is
 opened outside the lock that guards the reader, so ``close()`` never waits for an
-open; and releasing a reader (``close()``, the end of ``frames()``) waits at most
-``RELEASE_TIMEOUT_S`` (a reader stuck in a read keeps the lock). Whatever is still
+open; and releasing a reader (``close()``, the end of ``frames()``) is done by the worker thread
+that opened and read it (``_release_on_worker``: OpenCV's FFmpeg capture must not outlive, or be
+released beside, its own threads) and waits at most ``RELEASE_TIMEOUT_S`` (a reader stuck in a
+read keeps the lock). Whatever is still
 stuck then is left to its daemon thread: an open that returns after ``close()``
 releases what it opened.
 
@@ -73,6 +75,7 @@ from wott_hub.plugin_api import (
     Backoff,
     DeviceDescription,
     Driver,
+    DriverError,
     Health,
     NoisyAtRest,
     RawSample,
@@ -141,28 +144,6 @@ def _settle(fut: asyncio.Future[Any], value: Any, error: BaseException | None) -
         fut.set_exception(error)
     else:
         fut.set_result(value)
-
-
-async def _bounded(fn: Callable[[], None], timeout_s: float) -> bool:
-    """``fn()`` on a daemon thread of its own, waited for ``timeout_s`` at most; False if it did not end."""
-    done = asyncio.Event()
-    loop = asyncio.get_running_loop()
-
-    def run() -> None:
-        try:
-            fn()
-        finally:
-            try:
-                loop.call_soon_threadsafe(done.set)
-            except RuntimeError:  # the loop is closed
-                pass
-
-    threading.Thread(target=run, name="camera-release", daemon=True).start()
-    try:
-        await asyncio.wait_for(done.wait(), timeout_s)
-        return True
-    except TimeoutError:
-        return False
 
 
 class FrameReader(Protocol):
@@ -350,12 +331,20 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             try:
                 self.estimator.set_reference(images)
             except self.reference_error as e:
-                self.set_health(Health.degraded, f"waiting for the {self.rest_subject} at rest: {e}")
+                self.set_health(Health.degraded, self._waiting_reason(e))
                 return None
             self.set_health(Health.ok)
             displacement = np.zeros((self.description.mesh.n_nodes, 3))  # the rest frame itself
         self.last_truth, self.last_truth_t_s = truth, truth_t_s
-        return None if displacement is None else TactileFrame(t_ns, displacement)
+        return None if displacement is None else self._frame(t_ns, displacement)
+
+    def _frame(self, t_ns: int, displacement: np.ndarray) -> TactileFrame:
+        """The frame handed to the hub (a subclass adds what it measures besides the node field)."""
+        return TactileFrame(t_ns, displacement)
+
+    def _waiting_reason(self, e: Exception) -> str:
+        """The health reason while the first frames give no reference (``e``: why this one did not)."""
+        return f"waiting for the {self.rest_subject} at rest: {e}"
 
     # -- raw signals (``ServesRawSignals``): the last frame read, as it is ---------------------------
     def raw_sample(self, name: str) -> RawSample | None:
@@ -373,11 +362,20 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         return None
 
     # -- device actions (``Tareable``, ``Recalibratable``): requested on the loop, done in the thread --
+    def _refuse_without_reference(self, action: str) -> None:
+        """A tare or recalibration needs a reference to replace: without one the action fails with the
+        reason the device has none (issue 44: it answered ``ok`` and did nothing)."""
+        if not self.estimator.has_reference:
+            why = self.health().reason or "no frame read yet"
+            raise DriverError(f"cannot {action}: no rest reference yet ({why})")
+
     def tare(self) -> str:
+        self._refuse_without_reference("tare")
         self._rest_request = "tare"
         return f"the next frame is the {self.rest_subject}'s new rest reference"
 
     def recalibrate(self) -> str:
+        self._refuse_without_reference("recalibrate")
         self._rest_request = "recalibrate"
         return f"the marker grid is found again in the next frame (the {self.rest_subject} must be at rest)"
 
@@ -453,12 +451,27 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                 self.frames_yielded += 1
                 yield frame
         finally:
-            await _bounded(self._release, RELEASE_TIMEOUT_S)
-            self._worker.stop()
+            await self._release_on_worker()
 
     async def close(self) -> None:
         self._closed.set()
-        await _bounded(self._release, RELEASE_TIMEOUT_S)
+        await self._release_on_worker()
+
+    async def _release_on_worker(self) -> None:
+        """Release the source on the worker thread that opened and read it, waited for
+        ``RELEASE_TIMEOUT_S`` at most, then stop that thread.
+
+        OpenCV's FFmpeg capture owns decoder threads (FFV1 decodes on several); released from
+        another thread while its own is still alive, or not released at all before the process
+        exits, its C++ threads are destroyed joinable and the process aborts ("terminate called
+        without an active exception", exit 134: issue 44, ``config check --open`` on an FFV1 AVI).
+        Queued behind a read in progress, the release runs as soon as the read returns; a worker
+        stuck longer (a source that never answers) is left to its daemon thread as before."""
+        if self._reader is not None:
+            try:
+                await asyncio.wait_for(asyncio.shield(self._worker.call(self._release)), RELEASE_TIMEOUT_S)
+            except TimeoutError:
+                pass
         self._worker.stop()
 
 

@@ -1,4 +1,8 @@
-"""Bright marker blobs on a dark skin: where are they, to a fraction of a pixel?
+"""Marker blobs, bright on a dark skin or dark on a lit gel: where are they, to a fraction of a pixel?
+
+``polarity`` says which: ``"bright"`` (the barrel's white dots on black, the default) or
+``"dark"`` (a GelSight Mini marker gel's black dots on its lit surface, issue 44). A dark
+marker is found as a bright one in the inverted image, so everything below holds for both.
 
 One global threshold, connected components, then an intensity-weighted
 centroid per component. Two details make this work on real skins:
@@ -30,6 +34,7 @@ __all__ = ["MarkerDetector", "as_gray", "auto_threshold", "detect_markers"]
 
 MIN_CONTRAST = 20  # grey levels above the median skin a marker must reach
 CENTROIDS = ("weighted", "binary")
+POLARITIES = ("bright", "dark")
 SPLIT_CORE_FRACTION = 0.15  # of the blob's area, for a core to count as a marker of its own
 
 
@@ -99,7 +104,8 @@ class MarkerDetector:
 
     ``mask`` (H, W), non-zero where markers may be, also crops the search to its
     bounding box, which is where the ROI variant gets its speed. ``downscale=2``
-    detects on a half-size image (faster, coarser, merges the smallest markers).
+    detects on a half-size image (faster, coarser, merges the smallest markers). ``polarity``
+    ``"dark"`` finds dark dots (see the module doc).
     """
 
     min_area: float = 4
@@ -109,6 +115,7 @@ class MarkerDetector:
     centroid: str = "weighted"
     split: bool = True
     downscale: int = 1
+    polarity: str = "bright"
     areas: np.ndarray = field(default_factory=lambda: np.empty(0), init=False, repr=False)
     _roi: tuple[int, int, int, int] | None = field(default=None, init=False, repr=False)
     _mask_roi: np.ndarray | None = field(default=None, init=False, repr=False)
@@ -117,6 +124,8 @@ class MarkerDetector:
     def __post_init__(self) -> None:
         if self.centroid not in CENTROIDS:
             raise ValueError(f"centroid must be one of {CENTROIDS}, got {self.centroid!r}")
+        if self.polarity not in POLARITIES:
+            raise ValueError(f"polarity must be one of {POLARITIES}, got {self.polarity!r}")
         if self.downscale not in (1, 2, 4):
             raise ValueError(f"downscale must be 1, 2 or 4, got {self.downscale!r}")
         if not 0 < self.min_area <= self.max_area:
@@ -137,6 +146,8 @@ class MarkerDetector:
 
     def __call__(self, gray: np.ndarray) -> np.ndarray:
         g = as_gray(gray)
+        if self.polarity == "dark":
+            g = 255 - g  # a dark dot is a bright one in the negative
         x0 = y0 = 0
         mask = None
         if self._roi is not None:
@@ -173,14 +184,16 @@ def detect_markers(
     centroid: str = "weighted",
     split: bool = True,
     downscale: int = 1,
+    polarity: str = "bright",
 ) -> np.ndarray:
-    """Sub-pixel (x, y) centroids (K, 2) of the bright blobs of ``gray`` (H, W) uint8.
+    """Sub-pixel (x, y) centroids (K, 2) of the bright (``polarity="dark"``: dark) blobs of
+    ``gray`` (H, W) uint8.
 
     Pixel (row i, column j) is centred on (x=j, y=i), as in OpenCV. ``threshold``
     None picks Otsu's level per frame; ``mask`` restricts the search. Blobs of
     fewer than ``min_area`` or more than ``max_area`` pixels are dropped.
     """
-    return MarkerDetector(min_area, max_area, threshold, mask, centroid, split, downscale)(gray)
+    return MarkerDetector(min_area, max_area, threshold, mask, centroid, split, downscale, polarity)(gray)
 
 
 def _detect(g: np.ndarray, mask: np.ndarray | None, threshold: int | None, min_area: float,

@@ -1,0 +1,204 @@
+"""Gel sensors (issue 44): real GelSight presses through the gel driver, against their hand labels;
+and what a GelSight Mini at 25 fps and a DIGIT at 60 fps cost.
+
+    uv run wott-hub bench gel [--no-timing] [--no-write]
+
+Accuracy (``--no-timing`` runs only this): Taxim's GelSight Mini set (``taxim`` wheel: a background and
+24 ball presses, 480 x 640, 0.0295 mm/px, labels ``touch_center``/``touch_radius``) written as a folder
+of PNGs (the background 5 times, then each press followed by the background) and played through the
+``gelsight-mini`` driver as fast as processed. Counted: presses with exactly one contact, contacts on
+the background frames (phantoms), the centre error against the labels (mm), the spread of the
+estimated centres within each series (presses 0-12 and 13-23 press two fixed sites deeper and deeper:
+RMS distance from the series' mean, mm; the labels' own spread beside it), the radius against the
+label's (ratio). Held out, never tuned on: the older GelSight set of the same wheel (48 presses spread
+over its pad; its own params.json scale).
+
+Cost (the coordinator runs it; not with ``--no-timing``): CPU per frame of the driver's processing on
+a Mini frame shaped to 320 x 240 from the real frames and on a 240 x 320 DIGIT frame (the real
+background with a modelled press), as the share of one core at 25 and 60 frames/s; and decoding a
+full-size (3280 x 2464) JPEG made from a real frame, at full scale and at a quarter
+(``IMREAD_REDUCED_COLOR_4``), then shaped as gsrobotics does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from report import markdown_table, write_section
+from wott_driver_gel.evaluation import PressSet, load_taxim, write_recording
+from wott_driver_gel.settings import open_gel
+
+SERIES = ((0, 13), (13, 24))
+BALL_R = 2.0  # mm: Taxim's README, "a small sphere (~4mm)"
+
+
+def play(ps: PressSet, folder: Path) -> tuple[list, list]:
+    """(contacts of each press frame, contacts of each background frame) from the driver."""
+    at = write_recording(folder, ps.background, ps.presses)
+    n = 5 + 2 * len(at)
+    driver = open_gel("bench", "gelsight-mini", {"source": str(folder), "realtime": False,
+                                                 "mm_per_px": ps.mm_per_px}, max_frames=n - 4)
+
+    async def go() -> list:
+        out = [f async for f in driver.frames()]
+        await driver.close()
+        return out
+
+    frames = asyncio.run(go())
+    by_frame = {k + 4: f.contacts or () for k, f in enumerate(frames)}
+    return [by_frame[k] for k in at], [c for k, c in by_frame.items() if k not in at]
+
+
+def spread(points: np.ndarray) -> float:
+    return float(np.sqrt(((points - points.mean(axis=0)) ** 2).sum(axis=1).mean()))
+
+
+def accuracy(name: str, ps: PressSet, series: bool) -> tuple[list[list[str]], dict[str, float]]:
+    with tempfile.TemporaryDirectory() as tmp:
+        pressed, rest = play(ps, Path(tmp) / "frames")
+    k = ps.mm_per_px
+    found = [len(c) == 1 for c in pressed]
+    phantoms = sum(len(c) for c in rest)
+    est = np.array([c[0].location[:2] if len(c) == 1 else (np.nan, np.nan) for c in pressed]) / k
+    radius = np.array([c[0].radius_mm if len(c) == 1 else np.nan for c in pressed]) / k
+    err = np.hypot(*(est - ps.centres_px).T) * k
+    ratio = radius / ps.radii_px
+    ok = np.isfinite(err)
+    m = {"detected": int(sum(found)), "presses": len(pressed), "phantoms": phantoms,
+         "centre_median_mm": float(np.median(err[ok])), "centre_p90_mm": float(np.percentile(err[ok], 90)),
+         "radius_ratio_median": float(np.median(ratio[ok])),
+         "radius_within_15": float(np.mean(np.abs(ratio[ok] - 1) <= 0.15))}
+    rows = [[name, f"{m['detected']}/{m['presses']}", str(phantoms), f"{m['centre_median_mm']:.3f}",
+             f"{m['centre_p90_mm']:.3f}", f"{m['radius_ratio_median']:.2f}",
+             f"{100 * m['radius_within_15']:.0f} %"]]
+    if series:
+        for a, b in SERIES:
+            e, lab = est[a:b], ps.centres_px[a:b]
+            m[f"spread_{a}"] = spread(e) * k
+            m[f"label_spread_{a}"] = spread(lab) * k
+    return rows, m
+
+
+def depth(ps: PressSet) -> tuple[list[list[str]], str]:
+    """Leave-half-out: calibrated on the even presses, measured on the odd, and the other way round."""
+    from scipy.stats import spearmanr
+    from wott_driver_gel.depth import calibrate
+    from wott_driver_gel.evaluation import dent_depth
+    from wott_driver_gel.rest import smooth
+
+    n = len(ps.presses)
+    centre, dent = np.zeros(n), np.zeros(n)
+    for train, test in ((np.arange(0, n, 2), np.arange(1, n, 2)), (np.arange(1, n, 2), np.arange(0, n, 2))):
+        cal = calibrate(ps.background, ps.presses[train], ps.centres_px[train], ps.radii_px[train],
+                        ball_radius_mm=BALL_R, mm_per_px=ps.mm_per_px)
+        ref = smooth(ps.background, cal.sigma_px)
+        for i in test:
+            d = cal.depth(smooth(ps.presses[i], cal.sigma_px), ref, 8.0)
+            centre[i], dent[i] = dent_depth(d, ps.centres_px[i], ps.radii_px[i], cal.scale)
+    r = ps.radii_px * ps.mm_per_px
+    ball = BALL_R - np.sqrt(BALL_R**2 - r**2)  # the cap the labels' contact circle implies
+    err = dent / ball - 1
+    rows = [["dent below the contact edge / ball geometry (median)", f"{np.median(dent / ball):.2f}"],
+            ["presses with the dent within 20 % of the ball's", f"{int(np.sum(np.abs(err) <= 0.2))}/{n}"],
+            ["depth at the centre / ball geometry (median)", f"{np.median(centre / ball):.2f}"]]
+    for a, b in SERIES:
+        rows.append([f"Spearman, dent vs press order, presses {a}-{b - 1}",
+                     f"{spearmanr(np.arange(a, b), dent[a:b])[0]:.2f}"])
+        rows.append([f"Spearman, dent vs the labels' implied depth, presses {a}-{b - 1}",
+                     f"{spearmanr(ball[a:b], dent[a:b])[0]:.2f}"])
+    note = ("Depth (leave half out: a table from the even presses measures the odd ones, and the other way "
+            f"round; ball radius {BALL_R:g} mm). The ball's geometry fixes the dent inside the contact "
+            "circle, R - sqrt(R² - r²) with r the label's radius; the depth at the centre also holds the "
+            "gel sinking around the contact (an elastic solid: Hertz's indentation is twice the cap), so it "
+            "is reported beside. The labels' radii are not monotone in press order within a series, hence "
+            "both Spearman coefficients.")
+    return rows, note
+
+
+def timing() -> list[list[str]]:
+    import cv2
+    from wott_driver_gel.model import press_image
+    from wott_driver_gel.sources import decode_reduced, shape_mini
+
+    from wott_hub.plugin_api import MATERIALS  # noqa: F401 - the hub's import cost is not the frame's
+
+    ps = load_taxim("gelsight_mini")
+    rows = []
+    # decode: a full-size JPEG made from a real frame
+    full = cv2.resize(ps.presses[5], (3280, 2464), interpolation=cv2.INTER_CUBIC)
+    ok, jpeg = cv2.imencode(".jpg", full, [cv2.IMWRITE_JPEG_QUALITY, 90])
+    assert ok
+    for label, reduce in (("full", 1), ("reduced 1/4", 4)):
+        ts = []
+        for _ in range(20):
+            t = time.process_time()
+            shape_mini(decode_reduced(jpeg, reduce))
+            ts.append(time.process_time() - t)
+        rows.append([f"Mini 3280x2464 JPEG decode + shape, {label}", f"{1e3 * np.median(ts):.1f} ms",
+                     f"{100 * 25 * np.median(ts):.0f} % at 25 fps"])
+    # processing per frame, Mini 320x240 shaped from the real frames, DIGIT on its real background
+    shared = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+    bg = cv2.imread(str(shared / "digit" / "bg_digit_240_320.jpg"))
+    cases = {
+        "gelsight-mini": (cv2.resize(ps.background, (320, 240), interpolation=cv2.INTER_AREA),
+                          np.stack([cv2.resize(p, (320, 240), interpolation=cv2.INTER_AREA)
+                                    for p in ps.presses]), 25.0),
+        "digit": (bg, np.stack([press_image(bg, 120, 160, r_mm=2.0, depth_mm=0.1 * (1 + i % 8),
+                                            mm_per_px=0.0782, seed=i) for i in range(24)]), 60.0),
+    }
+    total = 0.0
+    for family, (rest, presses, fps) in cases.items():
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = Path(tmp) / "f"
+            write_recording(folder, rest, np.concatenate([presses] * 4))
+            n = 5 + 2 * 4 * len(presses)
+            driver = open_gel("t", family, {"source": str(folder), "realtime": False}, max_frames=n - 4)
+
+            async def go(drv=driver) -> float:
+                t0, k = time.process_time(), 0
+                async for _f in drv.frames():
+                    k += 1
+                await drv.close()
+                return (time.process_time() - t0) / max(k, 1)
+
+            per = asyncio.run(go())
+        total += per * fps
+        rows.append([f"{family} frame, PNG read + processing", f"{1e3 * per:.1f} ms",
+                     f"{100 * per * fps:.0f} % at {fps:g} fps"])
+    rows.append(["both together (processing; the Mini's decode above comes on top)", "",
+                 f"{100 * total:.0f} % of one core"])
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--no-timing", action="store_true", help="accuracy only (no CPU measurements)")
+    ap.add_argument("--no-write", action="store_true", help="print only; leave docs/benchmarks.md alone")
+    args = ap.parse_args()
+    header = ["set", "detected", "background contacts", "centre error median, mm", "p90, mm",
+              "radius / label (median)", "radius within 15 %"]
+    mini_rows, m = accuracy("GelSight Mini (taxim, 24 presses)", load_taxim("gelsight_mini"), True)
+    old_rows, _ = accuracy("older GelSight (taxim, 48, held out)", load_taxim("gelsight"), False)
+    body = markdown_table(header, mini_rows + old_rows)
+    body += ("\n\nWithin each series of the Mini set (the same site pressed deeper and deeper), the spread "
+             "of the estimated centres (RMS distance from the series' mean) against the labels' own: "
+             f"presses 0-12 {m['spread_0']:.3f} mm (labels {m['label_spread_0']:.3f}), presses 13-23 "
+             f"{m['spread_13']:.3f} mm (labels {m['label_spread_13']:.3f}).\n")
+    depth_rows, note = depth(load_taxim("gelsight_mini"))
+    body += "\n" + note + "\n\n" + markdown_table(["GelSight Mini depth", "value"], depth_rows) + "\n"
+    if not args.no_timing:
+        body += "\n" + markdown_table(["what", "CPU per frame", "share of one core"], timing()) + "\n"
+    print(body)
+    if not args.no_write:
+        cmd = "uv run wott-hub bench gel" + (" --no-timing" if args.no_timing else "")
+        path = write_section("gel", "Gel sensors: real GelSight presses against their labels", body, cmd)
+        print(f"written to {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""GelSight Mini and DIGIT (docs/gel.md)."""
