@@ -24,15 +24,15 @@ from wott_hub.drivers.base import Driver, DriverError
 from wott_hub.errors import SettingsError
 
 from . import hookspecs
+from .answers import checked_demo_devices, checked_families, checked_usb_matches
 from .dict_schema import with_defaults
 from .isolation import Fault, attempt
 from .loader import ENTRY_POINT_GROUP, describe_exception, discover, selected_names
 from .model import DeviceConfig, FamilyInfo, PluginInfo, UsbMatch
-from .settings import model_settings, settings_schema
+from .settings import model_settings
 
 if TYPE_CHECKING:
-    from jsonschema.exceptions import SchemaError
-    from jsonschema.protocols import Validator
+    pass
 
 __all__ = ["BUILTIN_PLUGINS", "Registry", "get_registry", "loaded_registry", "reset_registry"]
 
@@ -168,6 +168,11 @@ class Registry:
                 for value in out.value or ():  # no fault: the hook's list
                     yield name, value
 
+    def _in_registration_order(self, hook: str) -> list[tuple[str, Any]]:
+        """Every plugin's answers in the order the plugins were registered (built-ins first)."""
+        answers = list(self._call_each(hook))
+        return [(n, r) for n in self._records for name, r in answers if name == n]
+
     # -- families ------------------------------------------------------------
     def families(self) -> dict[str, FamilyInfo]:
         """Every family a loaded plugin provides, by name."""
@@ -177,58 +182,29 @@ class Registry:
             return dict(self._families)
 
     def _collect_families(self) -> dict[str, FamilyInfo]:
-        from jsonschema import Draft202012Validator
-        from jsonschema.exceptions import SchemaError
-
         hook = "wott_hub_families"
         found: dict[str, FamilyInfo] = {}
         for rec in self._records.values():
             rec.families = []
             rec.errors.pop(hook, None)  # asked afresh: old answers no longer apply
-        answers: dict[str, list[Any]] = {}
-        for name, result in self._call_each(hook):
-            answers.setdefault(name, []).append(result)
         # On a name clash the plugin registered first keeps the family (built-ins, then entry
         # points by name), whatever order pluggy calls them in: stable across runs and installs.
-        for name in [n for n in self._records if n in answers]:
-            for result in answers[name]:
-                self._accept_families(name, result, found, Draft202012Validator, SchemaError)
+        for name, result in self._in_registration_order(hook):
+            accepted, problems = checked_families(result)
+            for problem in problems:
+                self._record_error(name, hook, problem)
+            for fam, model in accepted:
+                if fam.name in found:
+                    self._record_error(name, hook, f"family {fam.name!r} is already provided by plugin "
+                                                   f"{found[fam.name].plugin!r}")
+                    continue
+                found[fam.name] = replace(fam, plugin=name)
+                if model is not None:
+                    self._models[fam.name] = model
+                self._records[name].families.append(fam.name)
         self._validators.clear()
         self._models = {n: m for n, m in self._models.items() if n in found}
         return found
-
-    def _accept_families(self, name: str, result: Any, found: dict[str, FamilyInfo],
-                         validator_cls: type[Validator], schema_error: type[SchemaError]) -> None:
-        hook = "wott_hub_families"
-        if not isinstance(result, list | tuple):
-            self._record_error(name, hook, f"returned {type(result).__name__}, not a list of FamilyInfo")
-            return
-        for fam in result:
-            if not isinstance(fam, FamilyInfo):
-                self._record_error(name, hook, f"returned a {type(fam).__name__}, not a FamilyInfo")
-                continue
-            model = fam.schema if isinstance(fam.schema, type) else None
-            schema = fam.schema
-            if isinstance(schema, type):  # a settings model: its JSON Schema for docs and the first check
-                try:
-                    schema = settings_schema(schema)
-                except Exception as e:
-                    self._record_error(name, hook, f"family {fam.name!r}: invalid settings model: {e}")
-                    continue
-                fam = replace(fam, schema=schema)
-            try:
-                validator_cls.check_schema(schema)
-            except schema_error as e:
-                self._record_error(name, hook, f"family {fam.name!r}: invalid settings schema: {e.message}")
-                continue
-            if fam.name in found:
-                self._record_error(name, hook, f"family {fam.name!r} is already provided by plugin "
-                                               f"{found[fam.name].plugin!r}")
-                continue
-            found[fam.name] = replace(fam, plugin=name)
-            if model is not None:
-                self._models[fam.name] = model
-            self._records[name].families.append(fam.name)
 
     # -- devices -------------------------------------------------------------
     def validate(self, cfg: DeviceConfig) -> DeviceConfig:
@@ -320,21 +296,11 @@ class Registry:
         out: list[DeviceConfig] = []
         ids: set[str] = set()
         for name, result in self._call_each(hook):
-            if not isinstance(result, list | tuple):
-                self._record_error(name, hook,
-                                   f"returned {type(result).__name__}, not a list of DeviceConfig")
-                continue
-            for cfg in result:
-                if not isinstance(cfg, DeviceConfig):
-                    self._record_error(name, hook, f"returned a {type(cfg).__name__}, not a DeviceConfig")
-                elif cfg.family not in families or families[cfg.family].plugin != name:
-                    self._record_error(name, hook, f"demo device {cfg.id!r} names family {cfg.family!r}, "
-                                                   "which this plugin does not provide")
-                elif cfg.id in ids:
-                    self._record_error(name, hook, f"demo device id {cfg.id!r} is already taken")
-                else:
-                    ids.add(cfg.id)
-                    out.append(cfg)
+            accepted, problems = checked_demo_devices(result, name, families, ids)
+            for problem in problems:
+                self._record_error(name, hook, problem)
+            ids.update(cfg.id for cfg in accepted)
+            out += accepted
         return out
 
     def claim(self, td: Mapping[str, Any]) -> DeviceConfig | None:
@@ -357,28 +323,13 @@ class Registry:
         a declaration that can never match is recorded against its plugin and left out, a repeated
         one kept once."""
         hook = "wott_hub_usb_devices"
-        answers: dict[str, list[Any]] = {}
-        for name, result in self._call_each(hook):
-            answers.setdefault(name, []).append(result)
         out: list[UsbMatch] = []
-        for name in [n for n in self._records if n in answers]:
-            for result in answers[name]:
-                if not isinstance(result, list | tuple):
-                    self._record_error(name, hook,
-                                       f"returned {type(result).__name__}, not a list of UsbMatch")
-                    continue
-                self._accept_usb(name, result, out)
+        for name, result in self._in_registration_order(hook):
+            accepted, problems = checked_usb_matches(result)
+            for problem in problems:
+                self._record_error(name, hook, problem)
+            out += [m for m in accepted if m not in out]
         return out
-
-    def _accept_usb(self, name: str, result: list[Any] | tuple[Any, ...], out: list[UsbMatch]) -> None:
-        hook = "wott_hub_usb_devices"
-        for match in result:
-            if not isinstance(match, UsbMatch):
-                self._record_error(name, hook, f"returned a {type(match).__name__}, not a UsbMatch")
-            elif (problem := match.problem()) is not None:
-                self._record_error(name, hook, f"USB match for family {match.family!r}: {problem}")
-            elif match not in out:
-                out.append(match)
 
     # -- reporting -----------------------------------------------------------
     def failed_plugins(self) -> dict[str, str]:
