@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
 from wott_hub.history.spool import FRAME_RECORDS
 
@@ -177,3 +178,25 @@ def test_a_damaged_spool_keeps_what_can_be_read_and_says_what_it_lost(
         kept_as = Path(damaged[0]["keptAs"])
         assert kept_as.exists() and kept_as.parent == folder / "hub.db.spool"  # quarantined, not deleted
         assert "Traceback" not in got["log"], got["log"][-3000:]
+
+
+@pytest.mark.parametrize("target", ["hub.db.hub-id", "hub.db"])
+def test_a_fifo_or_dev_zero_as_the_hub_id_file_or_database_is_one_line_not_a_hang(
+        tmp_path, running_hub, target):
+    """The same attack on the other files the hub reads: its id file beside the database, the database
+    file itself: before, the start blocked opening the FIFO (and ``/dev/zero`` would be read without end)."""
+    for name, plant in (("fifo", S.fifo), ("dev-zero", lambda p: p.symlink_to("/dev/zero"))):
+        folder = tmp_path / name
+        folder.mkdir()
+        plant(folder / target)
+        hub = running_hub(["-c", str(_config(folder))], folder)
+        try:
+            t0 = time.monotonic()
+            rc = hub.wait(60)
+            took = time.monotonic() - t0
+            log = hub.log()
+        finally:
+            hub.kill()
+        print(f"{target} {name}: exit {rc} in {took:.1f} s: {log.strip().splitlines()[-1:]}")
+        assert rc is not None and rc != 0, f"{name}: the hub did not end: {log[-2000:]}"
+        assert "Traceback" not in log and "not a regular file" in log, log[-3000:]

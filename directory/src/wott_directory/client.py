@@ -234,7 +234,9 @@ class EventStream:
                     stream.opened.set_result(start_line.code)
 
             def data_received(self, chunk: bytes) -> None:
-                if stream.status not in (0, 200) or not stream.opened.done() or stream.opened.result() != 200:
+                opened = stream.opened  # cancelled when the stream is closed under a read (a hub stopping)
+                if stream.status not in (0, 200) or not opened.done() or opened.cancelled() \
+                        or opened.result() != 200:
                     stream._body += chunk
                 else:
                     stream._feed(chunk.decode("utf-8", "replace"))

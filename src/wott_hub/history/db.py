@@ -204,6 +204,8 @@ def _check_sqlite_file(engine: Engine, *, allow_empty: bool) -> None:
     path = _sqlite_file(engine)
     if path is None or not path.exists():
         return
+    if not path.is_file():  # a FIFO would block the open below and SQLite's; a device never ends
+        raise HistoryError(f"{str(path)!r} is not a regular file: not a wott-hub history database")
     try:
         with path.open("rb") as f:
             head = f.read(len(_SQLITE_MAGIC))

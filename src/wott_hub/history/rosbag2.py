@@ -11,12 +11,19 @@ header stamp the event's own ``timeStamp`` where it has one. The mesh and ``/tf_
 transient local (latched), as robot_state_publisher offers ``/tf_static``.
 
 The folder must not exist (as ``ros2 bag record -o``); an export that fails, or finds no record,
-leaves nothing behind.
+leaves nothing behind. The name is taken first (``os.mkdir``: atomic, and it refuses whatever is
+there, a dangling symlink too), the bag written in a private folder beside it and moved onto the
+name at the end (``os.rename`` over the empty folder it took): two exports into one folder at
+once give one bag and one clear refusal, never a folder mixed or deleted under the other; a
+failure (a full disk, Ctrl-C) removes both the partial bag and the name it took.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
+import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,11 +69,6 @@ def export_rosbag2(reader: StorageReader, out_dir: Path, things: Sequence[str], 
 
     ``NotFound``: a Thing never recorded; ``InvalidInput``: ``out_dir`` exists, or no record is in
     the range (nothing is written then)."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-
-    from wott_hub.robotics.ros2_msgs import typestore
-
     things = list(dict.fromkeys(things))  # a Thing named twice is exported once (issue 48)
     infos = {}
     for thing in things:
@@ -74,8 +76,39 @@ def export_rosbag2(reader: StorageReader, out_dir: Path, things: Sequence[str], 
         if info is None:
             raise NotFound(f"no recorded device {thing!r} (see `wott-hub history list`)")
         infos[thing] = info
-    if out_dir.exists():
-        raise InvalidInput(f"{str(out_dir)!r} exists: a rosbag2 export writes a new folder")
+    taken = _take(out_dir)
+    work: Path | None = None
+    try:
+        work = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".partial", dir=out_dir.parent))
+        summary = _write(reader, work / out_dir.name, infos, t_from_ns, t_to_ns, names, progress)
+        os.rename(work / out_dir.name, taken)  # onto the empty folder taken above
+    except BaseException:
+        with contextlib.suppress(OSError):
+            taken.rmdir()
+        raise
+    finally:
+        if work is not None:
+            shutil.rmtree(work, ignore_errors=True)
+    return summary
+
+
+def _take(out_dir: Path) -> Path:
+    """The export's own name: made here, empty, or ``InvalidInput`` if anything is there."""
+    try:
+        os.mkdir(out_dir)
+    except FileExistsError:
+        raise InvalidInput(f"{str(out_dir)!r} exists: a rosbag2 export writes a new folder") from None
+    return out_dir
+
+
+def _write(reader: StorageReader, out_dir: Path, infos: dict[str, Any], t_from_ns: int | None,
+           t_to_ns: int | None, names: list[str] | None, progress: Progress | None) -> BagSummary:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+
+    from wott_hub.robotics.ros2_msgs import typestore
+
+    things = list(infos)
     ts = typestore()
     fleet = FleetMapping("ros2")
     for thing, info in infos.items():
@@ -118,8 +151,7 @@ def export_rosbag2(reader: StorageReader, out_dir: Path, things: Sequence[str], 
         writer.close()
         ok = True
     finally:
-        if not ok:
-            if writer.storage is not None:
+        if not ok and writer.storage is not None:
+            with contextlib.suppress(Exception):  # a full disk may fail this too: the folder goes anyway
                 writer.storage.abort()  # closes the file it opened
-            shutil.rmtree(out_dir, ignore_errors=True)
     return summary

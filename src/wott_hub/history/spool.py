@@ -196,8 +196,13 @@ class Spool:
         raise OSError(errno.EEXIST, f"{path} is not a regular file and cannot be set aside")
 
     def close(self) -> None:
+        """Never fails: a tail the disk refused was cut back when it refused (``_undo``), so nothing
+        of ours is lost here; a full disk must not turn a stop into an error (issue 48)."""
         if self._tail is not None:
-            self._tail.close()
+            try:
+                self._tail.close()
+            except OSError as e:
+                log.warning("history: closing the spool %s: %s", self.folder, e.strerror or e)
             self._tail = None
         if self._lock_file is not None:
             self._lock_file.close()  # releases the flock
@@ -532,20 +537,24 @@ def _parse_v1(f: IO[bytes], size: int, decoder: msgspec.msgpack.Decoder[Any], go
     length (a flipped byte costs that frame), an impossible length ends the reading (counted)."""
     at = len(MAGIC_V1)
     f.seek(at)
+    bad = 0
     while at + _V1.size <= size:
         length, crc = _V1.unpack(f.read(_V1.size))
+        if length == 0 or bad >= 2 or (at + _V1.size + length > size and length > _MAX_FRAME):
+            got.unknown_bytes += size - at  # never written so (no empty frame; two bad in a row: no
+            got.lost_bytes += size - at  # frame boundary left to trust): the rest is not read
+            break
         if at + _V1.size + length > size:
-            if length > _MAX_FRAME:
-                got.unknown_bytes += size - at
-                got.lost_bytes += size - at
-            break  # else the last frame cut short by a crash
+            break  # the last frame cut short by a crash
         body = f.read(length)
         at += _V1.size + length
         try:
             if zlib.crc32(body) != crc:
                 raise msgspec.DecodeError
             got.rows.extend(decoder.decode(body))
+            bad = 0
         except msgspec.DecodeError:
+            bad += 1
             got.unknown_bytes += _V1.size + length
             got.lost_bytes += _V1.size + length
     return got

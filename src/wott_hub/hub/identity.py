@@ -28,6 +28,7 @@ goes into URNs, MQTT topics and mDNS host names unchanged.
 from __future__ import annotations
 
 import logging
+import os
 import re
 import uuid
 from dataclasses import dataclass
@@ -94,6 +95,22 @@ def _state_file(cfg: HubConfig) -> Path | None:
     return None
 
 
+def _read_small(path: Path) -> str:
+    """The state file's text: a regular file of a few bytes. A FIFO there never blocks the start
+    (opened non-blocking) and a link to a device is never read (issue 48: whatever the hub reads
+    beside its database is a regular file, read in bounded size)."""
+    import stat
+
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise ConfigError(f"{path}: the hub id file is not a regular file; remove it (a new id is made)")
+        data = os.read(fd, 256)
+    finally:
+        os.close(fd)
+    return data.decode("utf-8", "replace")
+
+
 def hub_identity(cfg: HubConfig) -> HubIdentity:
     """The hub's identity for this config (reads or writes the state file: call it once)."""
     configured = getattr(cfg, "id", None)
@@ -105,7 +122,7 @@ def hub_identity(cfg: HubConfig) -> HubIdentity:
         log.info("hub id %s for this run only (no SQLite database or config file to keep it in)", hub_id)
         return HubIdentity(hub_id, "this run only")
     try:
-        return HubIdentity(_check(path.read_text().strip(), str(path)), str(path))
+        return HubIdentity(_check(_read_small(path).strip(), str(path)), str(path))
     except FileNotFoundError:
         pass
     except OSError as e:

@@ -180,9 +180,10 @@ def _spool_damage(out: dict[str, Any], writer: HistoryWriter) -> None:
     out["spool"]["damaged"] = damage
     if out.get("state") == "ok":
         lost = sum(d["records"] for d in damage)
+        estimated = " (estimated)" if any(d["estimated"] for d in damage) else ""
+        said = f"{lost} records lost" if lost else "no record lost"
         out["state"], out["reason"] = "degraded", (
-            f"the history spool could not be read whole: {lost} records lost"
-            f"{' (estimated)' if any(d['estimated'] for d in damage) else ''}; set aside: "
+            f"the history spool could not be read whole: {said}{estimated}; set aside: "
             + ", ".join(Path(d["keptAs"]).name for d in damage[:4]) + (" ..." if len(damage) > 4 else ""))
 
 
