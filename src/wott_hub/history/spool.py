@@ -61,6 +61,8 @@ import msgspec
 
 from wott_hub.errors import Conflict, HistoryError
 
+from .spool_damage import NotRegular, SetAside, kind, open_lock
+
 __all__ = ["FRAME_BYTES", "FRAME_RECORDS", "MAGIC", "SEGMENT_BYTES", "Segment", "Spool", "SpoolRow"]
 
 log = logging.getLogger(__name__)
@@ -98,12 +100,8 @@ class Segment:
     """Renamed aside (``.damaged``) when found damaged: forwarded from there, never deleted."""
 
 
-class _NotRegular(Exception):
-    """A spool entry that is not a regular file (a FIFO, a device, a symlink): never read."""
-
-
 @dataclass
-class _Read:
+class Read:
     rows: list[SpoolRow]
     lost: int = 0  # records of frames whose body failed (their header says how many)
     lost_bytes: int = 0  # bytes of those frames and of stretches without a readable header
@@ -123,8 +121,7 @@ class Spool:
         self.max_seq: dict[str, int] = {}
         """The highest seq ever spooled per Thing (this run or a previous one): a Thing registered
         while its records still wait here continues above them."""
-        self.damaged: list[dict[str, Any]] = []
-        """What could not be read (``damage()``): one entry per damaged segment or file set aside."""
+        self.aside = SetAside()  # what could not be read (``damage()``), renamed out of the way
         self._segments: list[Segment] = []
         self._forwarding: Segment | None = None  # the segment ``head`` gave out, not yet consumed
         self._tail: IO[bytes] | None = None
@@ -147,8 +144,8 @@ class Spool:
             seg = Segment(_number(path), path)
             try:
                 rows = self._read(seg)
-            except _NotRegular as e:
-                self._set_aside(path, str(e))
+            except NotRegular as e:
+                self.aside.entry(path, str(e))
                 continue
             if not rows:
                 if not seg.damaged:
@@ -164,7 +161,7 @@ class Spool:
 
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
-            lock = self._open_lock()
+            lock = open_lock(self.folder / "lock", self.aside)
         except OSError as e:
             raise HistoryError(f"cannot use the history spool {str(self.folder)!r}: {e.strerror or e}") \
                 from None
@@ -175,25 +172,6 @@ class Spool:
             raise Conflict(f"the history spool {str(self.folder)!r} is in use by another process; "
                            "give each hub its own [hub] history_spool") from None
         self._lock_file = lock
-
-    def _open_lock(self) -> IO[bytes]:
-        """``lock``, a regular file: a FIFO, a device or a symlink there is set aside (never opened
-        blocking: a FIFO without a reader fails ``ENXIO`` at once)."""
-        path = self.folder / "lock"
-        flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
-        for _ in range(3):
-            try:
-                fd = os.open(path, flags, 0o644)
-            except OSError as e:
-                if e.errno not in (errno.ELOOP, errno.ENXIO, errno.EISDIR):
-                    raise
-                self._set_aside(path, _kind(path))
-                continue
-            if stat.S_ISREG(os.fstat(fd).st_mode):
-                return os.fdopen(fd, "ab")
-            os.close(fd)
-            self._set_aside(path, _kind(path))
-        raise OSError(errno.EEXIST, f"{path} is not a regular file and cannot be set aside")
 
     def close(self) -> None:
         """Never fails: a tail the disk refused was cut back when it refused (``_undo``), so nothing
@@ -227,7 +205,7 @@ class Spool:
         """What could not be read and is still set aside (``keptAs`` exists): deleting that file says
         it has been seen to. Each: ``path``, ``keptAs``, ``records`` (lost), ``estimated`` (the
         count guessed from the bytes), ``bytes`` (lost), ``reason``."""
-        return [d for d in self.damaged if os.path.lexists(d["keptAs"])]
+        return self.aside.current()
 
     # --- writing ------------------------------------------------------------------------
 
@@ -338,8 +316,8 @@ class Spool:
         self._forwarding = seg
         try:
             return seg, self._read(seg)
-        except _NotRegular as e:  # replaced under us: nothing of it can be read
-            self._set_aside(seg.path, str(e), records=seg.records)
+        except NotRegular as e:  # replaced under us: nothing of it can be read
+            self.aside.entry(seg.path, str(e), records=seg.records)
             seg.damaged = True
             return seg, []
 
@@ -355,21 +333,21 @@ class Spool:
     # --- reading a segment --------------------------------------------------------------
 
     def _read(self, seg: Segment) -> list[SpoolRow]:
-        """The rows of ``seg`` that can be read. ``_NotRegular``: not a regular file (unread);
+        """The rows of ``seg`` that can be read. ``NotRegular``: not a regular file (unread);
         damage found the first time renames the segment and names it (``damage``)."""
         try:
             fd = os.open(seg.path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
         except OSError as e:
             if e.errno in (errno.ELOOP, errno.ENXIO):
-                raise _NotRegular(_kind(seg.path)) from None
+                raise NotRegular(kind(seg.path)) from None
             raise HistoryError(f"cannot read the history spool segment {str(seg.path)!r}: "
                                f"{e.strerror or e}") from None
         try:
             st = os.fstat(fd)
             if not stat.S_ISREG(st.st_mode):
-                raise _NotRegular(_kind(seg.path))
+                raise NotRegular(kind(seg.path))
             if st.st_size > self.max_bytes:
-                got = _Read([], unknown_bytes=st.st_size, lost_bytes=st.st_size)
+                got = Read([], unknown_bytes=st.st_size, lost_bytes=st.st_size)
                 reason = f"larger than the spool's bound ({st.st_size} > {self.max_bytes} bytes): not read"
             else:
                 with open(fd, "rb", buffering=_SCAN, closefd=False) as f:
@@ -382,53 +360,8 @@ class Spool:
             os.close(fd)
         seg.size = max(seg.size, st.st_size)
         if (got.lost or got.unknown_bytes or not got.header) and not seg.damaged:
-            self._damaged(seg, got, reason)
+            seg.path, seg.damaged = self.aside.segment(seg.path, seg.size, got, reason), True
         return got.rows
-
-    def _damaged(self, seg: Segment, got: _Read, reason: str) -> None:
-        per_record = (seg.size - got.lost_bytes) / len(got.rows) if got.rows else 0.0
-        guessed = -(-got.unknown_bytes // max(1, int(per_record))) if got.unknown_bytes and per_record else 0
-        estimated = bool(got.unknown_bytes)
-        if not reason:
-            parts = [f"{got.lost} records failed their checksum"] if got.lost else []
-            if got.unknown_bytes:
-                parts.append(f"{got.unknown_bytes} bytes had no readable frame header"
-                             + (f" (about {guessed} records)" if guessed else ""))
-            if not got.header:
-                parts.append("its header was broken")
-            reason = "; ".join(parts)
-        original = seg.path
-        seg.path = self._set_aside(original, reason, suffix=".damaged", records=got.lost + guessed,
-                                   estimated=estimated, lost_bytes=got.lost_bytes, kept=len(got.rows))
-        seg.damaged = True
-
-    def _set_aside(self, path: Path, reason: str, *, suffix: str = ".notfile", records: int = 0,
-                   estimated: bool = False, lost_bytes: int = 0, kept: int | None = None) -> Path:
-        """Rename ``path`` out of the spool's way (never deleted), name it in the log and ``damage``."""
-        target = path.with_name(path.name + suffix)
-        n = 1
-        while os.path.lexists(target) and n < 100:
-            target = path.with_name(f"{path.name}.{n}{suffix}")
-            n += 1
-        try:
-            os.rename(path, target)
-        except OSError as e:
-            log.warning("history: cannot set %s aside: %s", path, e.strerror or e)
-            target = path
-        what = (f"{records} records" + (" (estimated)" if estimated else "")) if records or estimated \
-            else "no records"
-        if suffix == ".notfile":
-            log.error("history: the spool entry %s is not a regular file (%s): not read, moved to %s",
-                      path, reason, target.name)
-        else:
-            log.error("history: the spool segment %s is damaged: %s could not be read (%s); %s "
-                      "kept and forwarded; the segment is kept as %s", path, what, reason,
-                      "nothing" if not kept else f"{kept} records", target)
-        self.damaged.append({"path": str(path), "keptAs": str(target), "records": records,
-                             "estimated": estimated, "bytes": lost_bytes,
-                             "reason": reason if suffix != ".notfile" else f"not a regular file ({reason})"})
-        del self.damaged[:-64]  # one per damaged segment: bounded all the same
-        return target
 
     def _count(self, seg: Segment, rows: Sequence[SpoolRow]) -> None:
         seg.records += len(rows)
@@ -458,22 +391,22 @@ def _frame(encoder: msgspec.msgpack.Encoder, rows: Sequence[SpoolRow]) -> bytes:
     return head + struct.pack("<I", zlib.crc32(head)) + body
 
 
-def _parse(f: IO[bytes], size: int, decoder: msgspec.msgpack.Decoder[Any]) -> _Read:
+def _parse(f: IO[bytes], size: int, decoder: msgspec.msgpack.Decoder[Any]) -> Read:
     """Every frame of a segment that can be read, one frame at a time, and what could not."""
     magic = f.read(len(MAGIC))
     if magic == MAGIC:
-        return _parse_frames(f, size, len(MAGIC), decoder, _Read([]))
+        return _parse_frames(f, size, len(MAGIC), decoder, Read([]))
     if magic == MAGIC_V1:
-        return _parse_v1(f, size, decoder, _Read([]))
-    got = _Read([], header=False)  # a broken header: the frames are found by their sync marks
+        return _parse_v1(f, size, decoder, Read([]))
+    got = Read([], header=False)  # a broken header: the frames are found by their sync marks
     got = _parse_frames(f, size, 0, decoder, got)
     if not got.rows and size > len(MAGIC_V1):  # none: perhaps the first format's frames
-        got = _parse_v1(f, size, decoder, _Read([], header=False))
+        got = _parse_v1(f, size, decoder, Read([], header=False))
     return got
 
 
 def _parse_frames(f: IO[bytes], size: int, at: int, decoder: msgspec.msgpack.Decoder[Any],
-                  got: _Read) -> _Read:
+                  got: Read) -> Read:
     f.seek(at)
     while at < size:
         head = f.read(_HEAD.size)
@@ -532,7 +465,7 @@ def _resync(f: IO[bytes], at: int, size: int) -> int | None:
     return None
 
 
-def _parse_v1(f: IO[bytes], size: int, decoder: msgspec.msgpack.Decoder[Any], got: _Read) -> _Read:
+def _parse_v1(f: IO[bytes], size: int, decoder: msgspec.msgpack.Decoder[Any], got: Read) -> Read:
     """The first format: a frame is a length and a CRC-32; a body failing its CRC is skipped by its
     length (a flipped byte costs that frame), an impossible length ends the reading (counted)."""
     at = len(MAGIC_V1)
@@ -558,19 +491,6 @@ def _parse_v1(f: IO[bytes], size: int, decoder: msgspec.msgpack.Decoder[Any], go
             got.unknown_bytes += _V1.size + length
             got.lost_bytes += _V1.size + length
     return got
-
-
-def _kind(path: Path) -> str:
-    try:
-        mode = os.lstat(path).st_mode
-    except OSError:
-        return "gone"
-    for test, name in ((stat.S_ISLNK, "a symbolic link"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISDIR, "a folder")):
-        if test(mode):
-            return name
-    return "not a regular file"
 
 
 def _number(path: Path) -> int:
