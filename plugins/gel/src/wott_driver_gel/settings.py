@@ -39,6 +39,9 @@ __all__ = ["DIGIT", "FAMILIES", "MINI", "DigitSettings", "GelSettings", "MiniSet
 
 MINI = "gelsight-mini"
 DIGIT = "digit"
+FORCE_ESTIMATE = ("the gel as an elastic (Winkler) foundation: E / h x the indented volume within twice the "
+                  "contact's radius, from the calibrated depth map (E the material's modulus, h the gel's "
+                  "thickness; docs/gel.md)")
 NODE_PITCH_MM = 1.0
 """The node grid's spacing over the gel's view (its depth field is sampled there)."""
 
@@ -191,7 +194,7 @@ def describe(device_id: str, family: str, s: GelSettings, size: tuple[int, int],
         material=MATERIALS[s.material], mesh=flat_pad(rows, cols, pitch_mm=pitch, clamp_border=False,
                                                        name=family),
         epsilon_mm=0.05, thickness_mm=s.thickness_mm, frame=CoordinateFrame(origin_name="cornerOfView"),
-        measures_contacts=True,
+        measures_contacts=True, force_estimate=FORCE_ESTIMATE if depth else "",
         description=(f"{name}: {size[0]}x{size[1]} px at {mm_per_px:.4f} mm/px ({w_mm:.1f} x {h_mm:.1f} mm); "
                      "contacts from colour change" + ("; depth and a normal-force estimate (Winkler "
                                                        "foundation, docs/gel.md) from its calibration."
