@@ -83,7 +83,9 @@ class DeviceDescription:
     (``TactileFrame.contacts``, ``tactile.measured``): the TD declares ``contactRadii`` and
     ``contactInformation`` is unknown (null) until the driver's first frame with a reference;
     ``force_estimate`` says how such a device estimates its contacts' forces (the TD says it, an
-    estimate); empty, it gives none and ``contactForces`` is empty.
+    estimate); empty, it gives none and ``contactForces`` is empty. ``shear``: the device measures
+    its nodes' in-plane motion (false: a gel without markers sees none, so its TD declares no
+    ``skinDisplacement``).
     """
 
     id: str
@@ -100,3 +102,4 @@ class DeviceDescription:
     node_signal: NodeSignal = DISPLACEMENT
     measures_contacts: bool = False
     force_estimate: str = ""
+    shear: bool = True

@@ -90,6 +90,8 @@ def build_tactile_td(
         _node_signal(td, desc.node_signal)
     if desc.measures_contacts:
         _measured_contacts(td, desc.force_estimate)
+    if not desc.shear:  # a gel without markers: no in-plane motion measured, no vectors to give
+        td["events"].pop("skinDisplacement", None)
     return state_defaults(td)
 
 
