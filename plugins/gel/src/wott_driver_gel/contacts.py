@@ -59,6 +59,8 @@ def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, sm
 
     mag = change(image if smoothed else smooth(image, p.sigma_px), ref.image)
     mask: np.ndarray = (mag > threshold(ref, p)).astype(np.uint8)
+    if not mask.any():  # the gel at rest, most frames: nothing to segment
+        return [], mag
     if p.open_px > 1:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((p.open_px, p.open_px), np.uint8))
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
