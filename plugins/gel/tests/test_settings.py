@@ -60,7 +60,10 @@ def test_an_unreadable_image_in_a_folder_disconnects_with_the_reason(folder):
             break
         it = driver.frames()
         task = asyncio.ensure_future(it.__anext__())
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + 60
         while driver.health().state is not Health.disconnected:
+            assert loop.time() < deadline, driver.health()
             await asyncio.sleep(0.01)
         task.cancel()
         await driver.close()
