@@ -123,3 +123,23 @@ def test_a_calibrated_gel_serves_its_depth_map_and_force_estimates(mini, tmp_pat
     touched = [v for r in recs if (v := json.loads(r.data))["numOfContacts"]]
     assert len(touched) == 4
     assert all(0 < -v["contactForces"][0]["z"] < 50 for v in touched)  # N, into the gel
+
+
+def test_a_gel_in_a_worker_process_is_unknown_until_its_reference(mini, tmp_path):
+    """The hub keeps the contacts of a device run by a worker process (``[hub] workers``): unknown (null)
+    there too until the worker's first frame with a reference, then what the worker measured."""
+    from wott_hub.plugins import DeviceConfig
+
+    write_recording(tmp_path / "f", mini.background, mini.presses[:2])
+    device = DeviceConfig("mini", "gelsight-mini", {"source": str(tmp_path / "f"), "fps": 1.0})
+    cfg = HubConfig(http_port=0, ws_port=0, database=str(tmp_path / "hub.db"), workers=1, devices=(device,))
+    with _Hub(cfg) as h:
+        td = httpx.get(h.hub.td_url("mini"), timeout=10).json()
+        href = td["properties"]["contactInformation"]["forms"][0]["href"]
+        seen = [httpx.get(href, timeout=10).json()]  # 5 rest frames at 1 frame/s: 4 s before a reference
+        deadline = time.monotonic() + 90
+        while not (seen[-1] or {}).get("numOfContacts") and time.monotonic() < deadline:
+            time.sleep(0.2)
+            seen.append(httpx.get(href, timeout=10).json())
+    assert seen[0] is None
+    assert seen[-1]["numOfContacts"] == 1 and len(seen[-1]["contactRadii"]) == 1
