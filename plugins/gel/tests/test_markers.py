@@ -49,9 +49,11 @@ def test_shear_of_the_dots_is_skin_displacement_on_the_nodes(mini, grid, tmp_pat
     box = (grid[:, 0] > 200) & (grid[:, 0] < 440) & (grid[:, 1] > 150) & (grid[:, 1] < 330)
     moved[box, 0] += 0.1 / k  # 0.1 mm along x under a finger that slides
     rest = dotted(mini.background, grid, k)
-    write_recording(tmp_path / "f", rest, np.stack([dotted(mini.background, moved, k)]), rest=5, between=1)
+    pressed = dotted(mini.presses[5], grid, k)  # a real press on the marker gel (its dots left in place)
+    write_recording(tmp_path / "f", rest, np.stack([dotted(mini.background, moved, k), pressed]), rest=5,
+                    between=1)
     driver = open_gel("m", "gelsight-mini", {"source": str(tmp_path / "f"), "realtime": False},
-                      max_frames=3)
+                      max_frames=5)
     assert driver.description.shear
     td = build_tactile_td(driver.description)
     assert "skinDisplacement" in td["events"]
@@ -68,7 +70,11 @@ def test_shear_of_the_dots_is_skin_displacement_on_the_nodes(mini, grid, tmp_pat
     outside = (nodes[:, 0] < 120) | (nodes[:, 0] > 540)
     assert np.allclose(d[inside, 0], 0.1, atol=0.02) and np.abs(d[inside, 1]).max() < 0.02
     assert np.abs(d[outside, :2]).max() < 0.02
+    assert frames[1].contacts == ()  # the dots moved: shear, not a contact
     assert np.abs(frames[2].displacement).max() < 0.02  # back at rest
+    (press,) = frames[3].contacts  # a press on the marker gel is still one contact, near its label
+    x, y = np.array(press.location[:2]) / k
+    assert np.hypot(x - mini.centres_px[5][0], y - mini.centres_px[5][1]) < 20
 
 
 def test_without_markers_no_skin_displacement_and_grid_refused(mini_recording):

@@ -44,6 +44,7 @@ class GelEstimate:
     contacts: list[PixelContact]
     change: np.ndarray  # (H, W) colour change from the reference, grey levels
     depth: np.ndarray | None = None  # (H/scale, W/scale) mm, calibrated devices, touched frames
+    shear: np.ndarray | None = None  # (N, 2) mm, the nodes' in-plane displacement (a marker gel)
 
 
 class GelEstimator:
@@ -103,11 +104,18 @@ class GelEstimator:
         ref = self.reference
         assert ref is not None
         frame = smooth(image, self.params.sigma_px)
-        contacts, change = find_contacts(frame, ref, self.params, smoothed=True)
+        shear = None
+        ignore = None
+        if self.field is not None:  # the dots first: where they are is not contact
+            shear = self.field.displacement(image)
+            ignore = self.field.dots(image.shape, self.params.sigma_px)
+        contacts, change = find_contacts(frame, ref, self.params, smoothed=True, ignore=ignore)
         depth = None
         if self.calibration is not None and contacts:
+            if ignore is not None:  # the dots' colour is no slope
+                frame = np.where(ignore[..., None], ref.image, frame)
             depth = self.calibration.depth(frame, ref.image, threshold(ref, self.params))
-        return GelEstimate(contacts, change, depth)
+        return GelEstimate(contacts, change, depth, shear)
 
     def measured(self, est: GelEstimate) -> tuple[MeasuredContact, ...]:
         k = self.mm_per_px
@@ -182,8 +190,8 @@ class GelDriver(CameraDriver):
         displacement = np.zeros((self.description.mesh.n_nodes, 3))
         if result.depth is not None:
             displacement[:, 2] = -est.node_depth(result.depth, self.description.mesh.nodes)
-        if est.field is not None:
-            displacement[:, :2] = est.field.displacement(np.asarray(image))
+        if est.field is not None and result.shear is not None:
+            displacement[:, :2] = result.shear
             total = len(est.field.markers.points)
             if not est.retaking and est.field.lost > LOST_FRACTION_DEGRADED * total:
                 self.set_health(Health.degraded, f"tracker lost {est.field.lost} of {total} markers")

@@ -94,6 +94,8 @@ class MarkerField:
         w = 1.0 / np.maximum(dist, 1e-6) ** 2
         self.idx, self.w = idx, w / w.sum(axis=1, keepdims=True)
         self.lost = 0
+        self.dot_px = max(2.0, 0.2 / mm_per_px)  # a dot's radius, px (measured at the first frame)
+        self.last = markers.points
 
     def reset(self) -> None:
         self.tracker.reset()
@@ -101,10 +103,26 @@ class MarkerField:
     def displacement(self, image: np.ndarray) -> np.ndarray:
         """(N, 2) mm: each node's in-plane displacement in this frame."""
         pts = self.detect(contrast(image, self.sigma_px))
+        if len(self.detect.areas):
+            self.dot_px = float(np.sqrt(np.median(self.detect.areas) / np.pi))
         tracked = self.tracker.track(pts)
         self.lost = int(np.isnan(tracked[:, 0]).sum())
         where = np.where(np.isnan(tracked), self.tracker.estimate, tracked)
+        self.last = np.nan_to_num(where, nan=-1e6)
         moved = (where - self.markers.points) * self.mm_per_px
         moved = np.nan_to_num(moved)
         out: np.ndarray = np.einsum("nk,nkd->nd", self.w, moved[self.idx])
+        return out
+
+    def dots(self, shape: tuple[int, ...], blur_px: float) -> np.ndarray:
+        """(H, W) bool: where the dots are at rest and in the last frame, widened by ``blur_px``. A dot
+        that moves changes the colour where it was and where it is: shear, not contact."""
+        import cv2
+
+        mask = np.zeros(shape[:2], np.uint8)
+        r = int(np.ceil(self.dot_px + 1.5 * blur_px))
+        for x, y in np.concatenate([self.markers.points, self.last]):
+            if 0 <= x < shape[1] and 0 <= y < shape[0]:
+                cv2.circle(mask, (int(round(x)), int(round(y))), r, 1, -1)
+        out: np.ndarray = mask.astype(bool)
         return out
