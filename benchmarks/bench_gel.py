@@ -125,8 +125,6 @@ def timing() -> list[list[str]]:
     from wott_driver_gel.model import press_image
     from wott_driver_gel.sources import decode_reduced, shape_mini
 
-    from wott_hub.plugin_api import MATERIALS  # noqa: F401 - the hub's import cost is not the frame's
-
     ps = load_taxim("gelsight_mini")
     rows = []
     # decode: a full-size JPEG made from a real frame

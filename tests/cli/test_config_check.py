@@ -147,7 +147,8 @@ browse = "yes"
         "device[0].kpa_per_count (device 'pad', family 'taxel-array'): got 1e+300; "
         "must be above 0 and at most 10",
         "device[1].family: unknown family 'flat-vison'; did you mean 'flat-vision'? "
-        "(installed: anyskin, barrel-vision, flat-vision, scene, taxel-array, wot-remote, xela)",
+        "(installed: anyskin, barrel-vision, digit, flat-vision, gelsight-mini, scene, taxel-array, "
+        "wot-remote, xela)",
     ], res.stderr
     assert "3 config error(s)" in res.stderr  # not "port missing": that follows from the typo
 

@@ -182,3 +182,15 @@ def test_frames_at_rest_reuse_the_rest_picture_with_the_same_bytes():
                                   rng=reference_rng)
         assert np.array_equal(img, expected)
     assert sim._rest is not None
+
+
+def test_tare_and_recalibrate_without_a_reference_fail_saying_why():
+    """Issue 44: they answered ``ok`` and did nothing while the pad had no rest reference."""
+    from wott_driver_flatpad.settings import open_pad
+
+    from wott_hub.drivers.base import DriverError
+
+    driver = open_pad("pad", {"source": "sim"})  # not run: no frame, no reference
+    for action in (driver.tare, driver.recalibrate):
+        with pytest.raises(DriverError, match="no rest reference yet"):
+            action()

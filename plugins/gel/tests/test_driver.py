@@ -58,7 +58,10 @@ def test_no_reference_while_the_image_changes_and_tare_says_why(mini, tmp_path):
     async def go() -> tuple[str, str]:
         it = driver.frames()
         task = asyncio.ensure_future(it.__anext__())
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + 60
         while not driver.health().reason.startswith("no rest frame yet: the image changed"):
+            assert loop.time() < deadline, driver.health()
             await asyncio.sleep(0.01)
         reason = driver.health().reason
         with pytest.raises(DriverError) as e:

@@ -60,7 +60,10 @@ def test_an_unreadable_image_in_a_folder_disconnects_with_the_reason(folder):
             break
         it = driver.frames()
         task = asyncio.ensure_future(it.__anext__())
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + 60
         while driver.health().state is not Health.disconnected:
+            assert loop.time() < deadline, driver.health()
             await asyncio.sleep(0.01)
         task.cancel()
         await driver.close()
@@ -120,3 +123,12 @@ def test_digit_frames_from_the_device_are_turned_like_digit_interface():
     assert (turned[0, 0] == qvga[0, 319]).all()  # 90° anticlockwise: the top-right corner comes top-left
     native = np.zeros((2464, 3280, 3), np.uint8)
     assert shape_mini(native).shape == (240, 320, 3)
+
+
+def test_a_serial_no_camera_has_is_one_line_saying_so():
+    """``serial``: udev's database read through pyudev (the real one here: no sensor is plugged in)."""
+    from wott_driver_gel.sources import video_device_for_serial
+    from wott_vision.camera import CameraError
+
+    with pytest.raises(CameraError, match="no video device with serial 'NOSUCHSERIAL'"):
+        video_device_for_serial("NOSUCHSERIAL")

@@ -110,3 +110,15 @@ def test_detector_reports_blob_areas():
     np.testing.assert_allclose(found[order], pts, atol=0.05)
     assert det.areas.shape == (2,)
     np.testing.assert_allclose(det.areas[order], np.pi * np.array([9.0, 64.0]), rtol=0.15)
+
+
+def test_dark_dots_on_a_lit_gel_are_found_with_dark_polarity():
+    """Issue 44: the detector found 0 of 63 dark dots (a GelSight Mini marker gel's are black)."""
+    ys, xs = np.mgrid[40:440:50, 40:600:80]
+    pts = np.column_stack([xs.ravel(), ys.ravel()]).astype(float) + 0.3
+    img = render_markers(pts, 6.0, (480, 640), intensity=40.0, background=200.0)
+    assert len(detect_markers(img)) < len(pts) // 2  # bright polarity: the gel, not the dots
+    found = detect_markers(img, polarity="dark")
+    assert len(found) == len(pts) == 56
+    order = np.lexsort((found[:, 0], found[:, 1]))
+    assert np.abs(found[order] - pts[np.lexsort((pts[:, 0], pts[:, 1]))]).max() < 0.1

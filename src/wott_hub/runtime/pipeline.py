@@ -375,7 +375,8 @@ class DevicePipeline:
         clock = time.monotonic
         records, unavailable_changed = self.records, self._unavailable_changed
         frame_done = sink.frame_done if isinstance(sink, FrameSink) else None
-        displaced = driver.description.node_signal.is_displacement  # else no skinDisplacement: not in mm
+        desc = driver.description  # skinDisplacement only in mm, and only from a skin that measures shear
+        displaced = desc.node_signal.is_displacement and desc.shear
         while True:
             try:
                 self.started()

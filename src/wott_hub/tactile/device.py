@@ -81,7 +81,11 @@ class DeviceDescription:
     frames' node vectors measure; ``epsilon_mm`` is in its unit (mm for the default displacement).
     ``measures_contacts``: the driver measures its contacts itself, with their radii
     (``TactileFrame.contacts``, ``tactile.measured``): the TD declares ``contactRadii`` and
-    ``contactInformation`` is unknown (null) until the driver's first frame with a reference.
+    ``contactInformation`` is unknown (null) until the driver's first frame with a reference;
+    ``force_estimate`` says how such a device estimates its contacts' forces (the TD says it, an
+    estimate); empty, it gives none and ``contactForces`` is empty. ``shear``: the device measures
+    its nodes' in-plane motion (false: a gel without markers sees none, so its TD declares no
+    ``skinDisplacement``).
     """
 
     id: str
@@ -97,3 +101,5 @@ class DeviceDescription:
     side_lobe_ratio: float = 0.0
     node_signal: NodeSignal = DISPLACEMENT
     measures_contacts: bool = False
+    force_estimate: str = ""
+    shear: bool = True

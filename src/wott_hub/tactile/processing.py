@@ -73,6 +73,8 @@ def processing_params(desc: DeviceDescription) -> ProcessingParams:
     if not signal.is_displacement:
         extra = {"force_model": "sum" if signal.gives_force else "none", "unit": signal.unit,
                  "actions": ActionParams(collision_speed_mm_s=math.inf)}
+    if desc.measures_contacts and not desc.force_estimate:  # measured contacts without a force
+        extra["force_model"] = "none"
     return ProcessingParams(epsilon_mm=desc.epsilon_mm, modulus_mpa=desc.material.modulus_mpa,
                             thickness_mm=desc.thickness_mm, side_lobe_ratio=desc.side_lobe_ratio,
                             measured_contacts=desc.measures_contacts, **extra)

@@ -89,14 +89,20 @@ def build_tactile_td(
     if not desc.node_signal.is_displacement:
         _node_signal(td, desc.node_signal)
     if desc.measures_contacts:
-        _measured_contacts(td)
+        _measured_contacts(td, desc.force_estimate)
+    if not desc.shear:  # a gel without markers: no in-plane motion measured, no vectors to give
+        td["events"].pop("skinDisplacement", None)
     return state_defaults(td)
 
 
-def _measured_contacts(td: dict[str, Any]) -> None:
+def _measured_contacts(td: dict[str, Any], force_estimate: str) -> None:
     """A device that measures its contacts (``DeviceDescription.measures_contacts``): their radii beside
-    their locations, and the value unknown (null) until its first frame with a rest reference."""
+    their locations, the value unknown (null) until its first frame with a rest reference, and its forces
+    labelled as the estimate they are (or said to be absent)."""
     info = td["properties"]["contactInformation"]
+    forces = info["properties"]["contactForces"]
+    forces["description"] = (f"An estimate, not a measurement: {force_estimate}" if force_estimate else
+                             "Always empty: this device measures no force.")
     info["description"] = (f"{info['description']} Measured by the device itself, with each contact's "
                            "radius; null (unknown) until its first frame with a rest reference.")
     info["properties"]["contactRadii"] = copy.deepcopy(CONTACT_RADII)

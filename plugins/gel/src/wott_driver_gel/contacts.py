@@ -51,14 +51,19 @@ def threshold(ref: RestReference, p: ContactParams) -> float:
     return max(p.min_change, p.noise_k * ref.noise)
 
 
-def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, smoothed: bool = False
-                  ) -> tuple[list[PixelContact], np.ndarray]:
+def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, smoothed: bool = False,
+                  ignore: np.ndarray | None = None) -> tuple[list[PixelContact], np.ndarray]:
     """The contacts of ``image`` against ``ref`` (see module doc), and the change magnitude (H, W).
-    ``smoothed``: ``image`` is already ``rest.smooth``ed by ``p.sigma_px``."""
+    ``smoothed``: ``image`` is already ``rest.smooth``ed by ``p.sigma_px``; ``ignore`` (H, W) bool: pixels
+    whose change is not contact (a marker gel's dots, ``markers.MarkerField.dots``)."""
     import cv2
 
     mag = change(image if smoothed else smooth(image, p.sigma_px), ref.image)
+    if ignore is not None:
+        mag[ignore] = 0.0
     mask: np.ndarray = (mag > threshold(ref, p)).astype(np.uint8)
+    if not mask.any():  # the gel at rest, most frames: nothing to segment
+        return [], mag
     if p.open_px > 1:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((p.open_px, p.open_px), np.uint8))
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)

@@ -11,6 +11,7 @@ end, the raw image) is ``wott_vision.driver.CameraDriver``'s. What is the gel's:
   keep the previous reference (the health says so);
 - each frame's contacts (``contacts.find_contacts``) are handed over in mm: x along the image's
   columns, y along its rows, from the view's corner (``cornerOfView``), with their radii;
+- with markers (``markers.MarkerField``), the nodes' in-plane displacement (skinDisplacement);
 - with a depth calibration (``depth.DepthCalibration``), a touched frame's depth map is integrated:
   each contact gets the indentation at its centre and a normal-force estimate (``depth.normal_force``
   over the disc twice its radius, along -z: into the gel), the nodes its depth (-z), and ``depthMap``
@@ -23,12 +24,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from wott_vision.driver import CameraDriver, FrameReader
+from wott_vision.driver import LOST_FRACTION_DEGRADED, CameraDriver, FrameReader
 
 from wott_hub.plugin_api import DriverError, Health, MeasuredContact, RawSample, TactileFrame
 
 from .contacts import ContactParams, PixelContact, find_contacts, threshold
 from .depth import DepthCalibration, normal_force
+from .markers import MarkerField, find_markers
 from .rest import NoRestFrame, RestCollector, RestReference, smooth
 
 if TYPE_CHECKING:
@@ -42,6 +44,7 @@ class GelEstimate:
     contacts: list[PixelContact]
     change: np.ndarray  # (H, W) colour change from the reference, grey levels
     depth: np.ndarray | None = None  # (H/scale, W/scale) mm, calibrated devices, touched frames
+    shear: np.ndarray | None = None  # (N, 2) mm, the nodes' in-plane displacement (a marker gel)
 
 
 class GelEstimator:
@@ -57,6 +60,9 @@ class GelEstimator:
         self.modulus_mpa, self.thickness_mm = modulus_mpa, thickness_mm
         self.reference: RestReference | None = None
         self.retaking = False
+        self.markers = False  # the gel has markers: shear from them (``markers.MarkerField``)
+        self.nodes_mm = np.zeros((0, 3))
+        self.field: MarkerField | None = None
 
     @classmethod
     def of_settings(cls, s: GelSettings, mm_per_px: float, calibration: DepthCalibration | None = None
@@ -76,20 +82,40 @@ class GelEstimator:
         return self.reference is not None
 
     def set_reference(self, image: np.ndarray) -> None:
-        self.reference = self.collector.add(image)
+        self.take(self.collector.add(image))
+
+    def take(self, ref: RestReference) -> None:
+        """``ref`` as the rest reference; with markers, their pattern in it (``NoRestFrame`` if none)."""
+        field = None
+        if self.markers:
+            found = find_markers(ref.raw, self.mm_per_px)
+            if found is None:
+                raise NoRestFrame("no rest frame yet: the rest frame shows no marker pattern (markers = "
+                                  "grid, or found in the recording's first frame)")
+            field = MarkerField(found, self.nodes_mm, self.mm_per_px)
+        self.reference, self.field = ref, field
 
     def reset_tracking(self) -> None:
-        """Nothing tracked between frames (the reference survives a reconnect)."""
+        """The markers tracked from their rest positions again (the reference survives a reconnect)."""
+        if self.field is not None:
+            self.field.reset()
 
     def estimate(self, image: np.ndarray) -> GelEstimate:
         ref = self.reference
         assert ref is not None
         frame = smooth(image, self.params.sigma_px)
-        contacts, change = find_contacts(frame, ref, self.params, smoothed=True)
+        shear = None
+        ignore = None
+        if self.field is not None:  # the dots first: where they are is not contact
+            shear = self.field.displacement(image)
+            ignore = self.field.dots(image.shape, self.params.sigma_px)
+        contacts, change = find_contacts(frame, ref, self.params, smoothed=True, ignore=ignore)
         depth = None
         if self.calibration is not None and contacts:
+            if ignore is not None:  # the dots' colour is no slope
+                frame = np.where(ignore[..., None], ref.image, frame)
             depth = self.calibration.depth(frame, ref.image, threshold(ref, self.params))
-        return GelEstimate(contacts, change, depth)
+        return GelEstimate(contacts, change, depth, shear)
 
     def measured(self, est: GelEstimate) -> tuple[MeasuredContact, ...]:
         k = self.mm_per_px
@@ -152,7 +178,7 @@ class GelDriver(CameraDriver):
         est = self.estimator
         if est.retaking:
             try:
-                est.reference = est.collector.add(image)
+                est.take(est.collector.add(image))
                 est.retaking = False
                 self.set_health(Health.ok)
             except NoRestFrame as e:
@@ -164,6 +190,11 @@ class GelDriver(CameraDriver):
         displacement = np.zeros((self.description.mesh.n_nodes, 3))
         if result.depth is not None:
             displacement[:, 2] = -est.node_depth(result.depth, self.description.mesh.nodes)
+        if est.field is not None and result.shear is not None:
+            displacement[:, :2] = result.shear
+            total = len(est.field.markers.points)
+            if not est.retaking and est.field.lost > LOST_FRACTION_DEGRADED * total:
+                self.set_health(Health.degraded, f"tracker lost {est.field.lost} of {total} markers")
         return displacement
 
     def _frame(self, t_ns: int, displacement: np.ndarray) -> TactileFrame:

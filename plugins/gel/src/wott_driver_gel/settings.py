@@ -39,6 +39,9 @@ __all__ = ["DIGIT", "FAMILIES", "MINI", "DigitSettings", "GelSettings", "MiniSet
 
 MINI = "gelsight-mini"
 DIGIT = "digit"
+FORCE_ESTIMATE = ("the gel as an elastic (Winkler) foundation: E / h x the indented volume within twice the "
+                  "contact's radius, from the calibrated depth map (E the material's modulus, h the gel's "
+                  "thickness; docs/gel.md)")
 NODE_PITCH_MM = 1.0
 """The node grid's spacing over the gel's view (its depth field is sampled there)."""
 
@@ -68,8 +71,9 @@ class GelSettings(BackoffSettings):
         "18.88 mm over the frame's width, Taxim's 0.0295 mm/px at 640 px; DIGIT 18.77 mm, tacto's camera)."
     ))] | None = None
     markers: Annotated[str, Meta(extra_json_schema={"enum": ["auto", "none", "grid"]}, description=(
-        "Printed markers on the gel: \"auto\" (looked for, dark or bright, in the rest frame), \"none\", or "
-        "\"grid\" (required: no rest reference without them). With markers: skinDisplacement (shear)."
+        "Printed markers on the gel: \"auto\" (looked for, dark or bright, in a recording's first frame; a "
+        "live sensor: none), \"none\", or \"grid\" (required: no rest reference without them). With markers: "
+        "skinDisplacement (shear)."
     ))] = "auto"
     rest_frames: Annotated[int, Meta(ge=1, le=300, description=(
         "Frames at rest whose median is the rest reference."))] = 5
@@ -129,8 +133,9 @@ def _check(family: str, s: GelSettings) -> None:
         raise SettingsError(f"source: {s.source!r}: no such file or folder")
 
 
-def _recording(s: GelSettings) -> tuple[Callable[[], FrameReader], tuple[int, int], float]:
-    """(open, (width, height), fps) of the recording ``s.source``, probed (see the module doc)."""
+def _recording(s: GelSettings) -> tuple[Callable[[], FrameReader], tuple[int, int], float, Any]:
+    """(open, (width, height), fps, first frame) of the recording ``s.source``, probed (see the module
+    doc)."""
     from wott_vision.camera import CameraError, open_source
 
     from .sources import FolderReader
@@ -157,7 +162,7 @@ def _recording(s: GelSettings) -> tuple[Callable[[], FrameReader], tuple[int, in
     if not ok or frame is None:
         raise SettingsError(f"source: {src!r} gives no frame: {failure or 'not a video or image'}")
     h, w = frame.shape[:2]
-    return open_recording, (w, h), rate
+    return open_recording, (w, h), rate, frame
 
 
 def _sensor(family: str, s: GelSettings) -> tuple[Callable[[], FrameReader], tuple[int, int], float]:
@@ -179,23 +184,26 @@ def _sensor(family: str, s: GelSettings) -> tuple[Callable[[], FrameReader], tup
 
 
 def describe(device_id: str, family: str, s: GelSettings, size: tuple[int, int], mm_per_px: float,
-             depth: bool = False) -> DeviceDescription:
+             depth: bool = False, markers: bool = False) -> DeviceDescription:
     w_mm, h_mm = size[0] * mm_per_px, size[1] * mm_per_px
     cols = max(2, int(round(w_mm / NODE_PITCH_MM)) + 1)
     rows = max(2, int(round(h_mm / NODE_PITCH_MM)) + 1)
     pitch = min(w_mm / (cols - 1), h_mm / (rows - 1))
     name = "GelSight Mini" if family == MINI else "DIGIT"
+    what = "contacts from colour change"
+    if markers:
+        what += "; shear from its markers"
+    if depth:
+        what += "; depth and a normal-force estimate (Winkler foundation, docs/gel.md) from its calibration"
     return DeviceDescription(
         id=device_id, title=s.title or device_id, family=family,
         shape=SkinShape("rectangularPrism", length_mm=w_mm, width_mm=h_mm, height_mm=s.thickness_mm),
         material=MATERIALS[s.material], mesh=flat_pad(rows, cols, pitch_mm=pitch, clamp_border=False,
                                                        name=family),
         epsilon_mm=0.05, thickness_mm=s.thickness_mm, frame=CoordinateFrame(origin_name="cornerOfView"),
-        measures_contacts=True,
+        measures_contacts=True, force_estimate=FORCE_ESTIMATE if depth else "", shear=markers,
         description=(f"{name}: {size[0]}x{size[1]} px at {mm_per_px:.4f} mm/px ({w_mm:.1f} x {h_mm:.1f} mm); "
-                     "contacts from colour change" + ("; depth and a normal-force estimate (Winkler "
-                                                       "foundation, docs/gel.md) from its calibration."
-                                                       if depth else ".")),
+                     f"{what}."),
     )
 
 
@@ -206,13 +214,25 @@ def open_gel(device_id: str, family: str, settings: Mapping[str, Any], *,
 
     s = read_settings(FAMILIES[family], settings)
     _check(family, s)
+    first = None
     if s.source is not None:
-        open_source, size, fps = _recording(s)
+        open_source, size, fps, first = _recording(s)
         name = f"recording {s.source!r}"
     else:
         open_source, size, fps = _sensor(family, s)
         name = f"{family} {s.serial or s.device!r}"
     mm_per_px = s.mm_per_px or default_mm_per_px(family, size[0])
+    markers = s.markers == "grid"
+    if s.markers == "auto" and first is not None:  # a recording shows whether its gel has markers
+        from .markers import find_markers
+
+        markers = find_markers(first, mm_per_px) is not None
+    elif s.markers == "grid" and first is not None:
+        from .markers import find_markers
+
+        if find_markers(first, mm_per_px) is None:
+            raise SettingsError(f"markers: \"grid\", but the first frame of {s.source!r} shows no marker "
+                                "pattern (dark or bright dots)")
     calibration = None
     if s.calibration is not None:
         from .depth import DepthCalibration
@@ -224,8 +244,10 @@ def open_gel(device_id: str, family: str, settings: Mapping[str, Any], *,
         if abs(calibration.mm_per_px / mm_per_px - 1) > 0.01:
             raise SettingsError(f"calibration: made at {calibration.mm_per_px:g} mm/px, this device's frames "
                                 f"are {mm_per_px:g} mm/px (calibrate at this device's frame size)")
-    description = describe(device_id, family, s, size, mm_per_px, calibration is not None)
+    description = describe(device_id, family, s, size, mm_per_px, calibration is not None, markers)
     estimator = GelEstimator.of_settings(s, mm_per_px, calibration)
+    estimator.markers = markers
+    estimator.nodes_mm = description.mesh.nodes
     driver = GelDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
                        max_frames=max_frames)
     driver.raw_signals = (RawSignal("camera", "image", (size[1], size[0]), rate_hz=fps,
