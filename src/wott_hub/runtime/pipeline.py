@@ -175,11 +175,8 @@ class DevicePipeline:
         return self.unavailable_json
 
     def _unavailable_changed(self, t_ns: int, sink: RecordSink) -> None:
-        """Publish ``unavailableNodes`` when the driver's ``unavailable_nodes`` changed (vision skins).
-
-        Per frame: one attribute read and an identity check; the list is compared
-        (and encoded) only when the driver made a new one.
-        """
+        """Publish ``unavailableNodes`` when the driver's ``unavailable_nodes`` changed (vision skins). Per
+        frame: an attribute read and an identity check; compared (and encoded) only when it is a new list."""
         reporter = self._reporter
         if reporter is None:
             return
