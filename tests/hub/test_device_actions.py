@@ -100,7 +100,9 @@ def test_restart_reopens_the_driver_and_keeps_the_stream_and_its_sequence(live, 
     assert r.status_code == 200, r.text
     assert r.json()["outcome"] == "ok"
     restarted_at = len(stream.got)
-    time.sleep(0.6)
+    deadline = time.monotonic() + 60  # a hang's bound: counted events, not a time window
+    while len(stream.got) <= restarted_at + 10 and time.monotonic() < deadline:
+        time.sleep(0.05)
     got = stream.stop()
     assert len(got) > restarted_at + 10, "no events after the restart on the same connection"
     ids = [i for i, _, _ in got]

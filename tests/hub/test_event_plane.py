@@ -7,7 +7,7 @@ import asyncio
 from wott_hub.events import KIND_EVENT, KIND_PROPERTY, EventPlane, Record
 
 
-async def _drain(sub, n, timeout=2.0):
+async def _drain(sub, n, timeout=30.0):  # a hang's bound: records already published come at once
     out = []
 
     async def take():

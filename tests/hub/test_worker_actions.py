@@ -85,12 +85,16 @@ def test_restart_in_the_worker_keeps_the_stream_and_leaves_the_others_uninterrup
     td = _td(live, "pad")
     before = _health(live, "pad")
     own, other = sse(f"{live.hub.td_url('pad')}/events"), sse(f"{live.hub.td_url('pad2')}/events")
-    time.sleep(0.5)
+    deadline = time.monotonic() + 60  # both streams going before the restart (counted, not timed)
+    while (not own.got or len(other.got) <= 5) and time.monotonic() < deadline:
+        time.sleep(0.05)
     r = _invoke(td, "restart")
     assert r.status_code == 200, r.text
     assert r.json()["outcome"] == "ok" and r.json()["invokedAction"] == "restart"
     at_own, at_other = len(own.got), len(other.got)
-    time.sleep(1.0)
+    deadline = time.monotonic() + 60  # a hang's bound: counted events, not a time window
+    while (len(own.got) <= at_own + 10 or len(other.got) <= at_other + 10) and time.monotonic() < deadline:
+        time.sleep(0.05)
     got_own, got_other = own.stop(), other.stop()
     assert len(got_own) > at_own + 10, "no events after the restart on the same connection"
     assert len(got_other) > at_other + 10 and at_other > 5

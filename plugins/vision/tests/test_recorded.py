@@ -55,5 +55,5 @@ def test_realtime_paces_at_the_recorded_rate_and_batch_does_not(recordings):
     t0 = time.monotonic()
     _times(open_source(str(d / "f_%03d.png"), fps=4.0, realtime=False))  # 2.75 s of recording
     batch = time.monotonic() - t0
-    assert paced >= 0.95 * (n - 1) / 40.0
-    assert batch < 1.0
+    assert paced >= 0.95 * (n - 1) / 40.0  # pacing only makes it later: a bound no load breaks
+    assert batch < (n - 1) / 4.0  # not paced: sooner than the recording lasts (a busy machine included)
