@@ -164,6 +164,11 @@ class BinaryEventSocket(tornado.websocket.WebSocketHandler):
 
     async def get(self, *args: Any, **kwargs: Any) -> None:
         thing = _thing(self.ctx, kwargs["thing_id"], kwargs["name"])
+        if self.request.headers.get("Upgrade", "").lower() != "websocket":
+            # tornado answers a plain-text 400 itself: said here as every refusal of the hub is (issue 48)
+            raise tornado.web.HTTPError(400, reason=f"{self.request.path} is a WebSocket: send the upgrade "
+                                                    f"handshake, or GET {self.request.path[:-3]} for the "
+                                                    "packets as one HTTP response")
         after = _after(self.get_query_argument("lastEventId", None))
         if not self.ctx.streams_ready.is_set():
             await self.ctx.streams_ready.wait()
