@@ -94,6 +94,7 @@ class BinaryEventHandler(BaseHandler):
         self.ctx.sse.add(self)
         conn = self.request.connection
         stream = conn.stream  # type: ignore[union-attr]  # tornado's HTTP1Connection
+        sub.cut = stream.close  # cut off at max_pending: disconnected, its buffers let go
         try:
             self.set_header("Content-Type", BINARY_EVENTS[name])
             self.set_header("Cache-Control", "no-cache")
@@ -190,6 +191,10 @@ class BinaryEventSocket(tornado.websocket.WebSocketHandler):
     async def _run(self) -> None:
         sub = self._sub
         assert sub is not None  # subscribed in get(), before the handshake completes
+
+        conn = self.ws_connection
+        if conn is not None and conn.stream is not None:
+            sub.cut = conn.stream.close  # cut off at max_pending: disconnected, its buffers let go
 
         def frames(batch: list[Record]) -> bytes:
             return b"".join([_binary_frame(p) for p in map(packet_of, batch) if p is not None])
