@@ -110,10 +110,18 @@ class FoxgloveLive:
         self._loop = asyncio.get_running_loop()
         self.context = foxglove.Context()
         cert, key = self.tls if self.tls is not None else (None, None)
-        self.server = foxglove.start_server(
-            name=self.name, host=self.cfg.host, port=self.cfg.port, context=self.context,
-            server_listener=_Listener(self), capabilities=[],
-            message_backlog_size=self.cfg.backlog, tls_cert=cert, tls_key=key)
+        try:
+            self.server = foxglove.start_server(
+                name=self.name, host=self.cfg.host, port=self.cfg.port, context=self.context,
+                server_listener=_Listener(self), capabilities=[],
+                message_backlog_size=self.cfg.backlog, tls_cert=cert, tls_key=key)
+        except RuntimeError as e:  # the SDK's FoxgloveError: a port in use, an address not here
+            import errno
+
+            text = str(e).removeprefix("FoxgloveError: ")
+            code = errno.EADDRINUSE if "in use" in text else errno.EADDRNOTAVAIL
+            raise OSError(code, f"the Foxglove endpoint on {self.cfg.host}:{self.cfg.port}: {text} "
+                                "(choose another with --foxglove-port or [foxglove] port)") from None
         if not disable_nagle(self.port or 0):
             log.warning("Foxglove: the listener on port %s was not found to turn Nagle's algorithm off "
                         "(not Linux?): messages may wait up to 40 ms for the client's ACK", self.port)
