@@ -192,6 +192,7 @@ class Hub:
             self._foxglove = FoxgloveLive(self.config.foxglove, self._plane, name=self.config.name, tls=tls)
             self._server.on_expose.append(self._foxglove.exposed)
             self._server.on_remove.append(self._foxglove.removed)
+            self._status.foxglove = self._foxglove
         self._foxglove.start()
 
     async def __aenter__(self) -> Hub:
