@@ -252,3 +252,62 @@ def test_twenty_well_behaved_clients_keep_the_bystanders_rate(hub, bystander):
     print(f"20 clients: {got} messages read, bystander {before:.1f} -> {under:.1f}/s")
     assert got > 0
     assert under > 0.6 * before, f"the bystander's rate fell from {before:.1f} to {under:.1f}/s"
+
+
+def test_raw_image_streams_are_capped_and_keep_the_bystanders_rate(hub, bystander):
+    """Item 6: 200 concurrent rawImage streams (or 300 unread) halved the camera devices' rates. Here 12
+    reading and 12 never-read streams: at most ``MAX_RAW_STREAMS`` are served, the rest refused 503."""
+    import socket
+    import threading
+
+    import httpx
+
+    from wott_hub.servient.raw import MAX_RAW_STREAMS
+
+    path = "/wot/cam/properties/rawImage/stream?maxRate=10"
+    url = f"{hub.url}{path}"
+    statuses: list[int] = []
+    got = [0]
+    stop = threading.Event()
+
+    def read() -> None:
+        try:
+            with httpx.Client(timeout=httpx.Timeout(10, read=30)) as c, c.stream("GET", url) as r:
+                statuses.append(r.status_code)
+                for data in r.iter_raw():
+                    got[0] += len(data)
+                    if stop.is_set():
+                        return
+        except httpx.HTTPError:
+            pass
+
+    r0 = time.monotonic()
+    time.sleep(3.0)
+    t0 = time.monotonic()
+    readers = [threading.Thread(target=read, daemon=True) for _ in range(12)]
+    for t in readers:
+        t.start()
+    time.sleep(1.0)
+    host, port = hub.url.removeprefix("http://").split(":")
+    unread = []
+    for _ in range(12):
+        s = socket.create_connection((host, int(port)), timeout=10)
+        s.sendall(f"GET {path} HTTP/1.1\r\nHost: {host}\r\n\r\n".encode())
+        unread.append(s)
+    time.sleep(6.0)
+    t1 = time.monotonic()
+    refused = 0
+    for s in unread:  # each answered with its status line already: 200 (a stream) or 503
+        s.settimeout(5)
+        head = s.recv(64)
+        refused += b" 503 " in head
+        s.close()
+    stop.set()
+    for t in readers:
+        t.join(10)
+    before, under = rate(bystander, r0, t0), rate(bystander, t0, t1)
+    print(f"raw streams: {statuses.count(200)} + {12 - refused} served, {refused} refused, {got[0] >> 20} MB "
+          f"read, bystander {before:.1f} -> {under:.1f}/s")
+    assert statuses.count(200) + 12 - refused <= MAX_RAW_STREAMS
+    assert refused + statuses.count(503) >= 24 - MAX_RAW_STREAMS
+    assert under > 0.5 * before, f"the bystander's rate fell from {before:.1f} to {under:.1f}/s"

@@ -12,6 +12,9 @@ SSE stream of the JSON values at the default rate, else one long-poll answer, th
 form's href as it is, and cannot expand ``{?maxRate}``) reads in a loop. The TD declares them
 (``td.raw``, ``td.forms``).
 
+At most ``MAX_RAW_STREAMS`` streams are open at once on a hub (issue 48: 200 streams, or 300 a client
+never read, halved the camera devices' own rates); beyond, a 503 problem+json with ``Retry-After``.
+
 Every stream ends when its Thing stops being served (``removeDevice``, issue 48 item 7), as the event
 streams do: each turn checks that the Thing it reads is still the one served under its id.
 
@@ -42,9 +45,12 @@ from .context import ServingContext
 from .http import SSE_OPEN, BaseHandler
 from .things import ServedThing
 
-__all__ = ["BOUNDARY", "LONG_POLL_S", "RawObserveHandler", "RawPropertyHandler", "RawStreamHandler"]
+__all__ = ["BOUNDARY", "LONG_POLL_S", "MAX_RAW_STREAMS", "RawObserveHandler", "RawPropertyHandler",
+           "RawStreamHandler"]
 
 BOUNDARY = "frame"
+MAX_RAW_STREAMS = 16
+"""Raw-signal streams open at once (each sends a camera's JPEG up to its frame rate from the hub's loop)."""
 LONG_POLL_S = 10.0
 """How long a long-poll ``/observe`` waits for a frame newer than the one it found: then the latest."""
 _FORMATS = {IMAGE: ("json", "png", "jpeg", "npy"), GRID: ("json", "npy"), VECTORS: ("json", "npy")}
@@ -141,6 +147,18 @@ class RawStreamHandler(_RawBase):
         signal = self.signal(raw, name)
         period = 1.0 / self.max_rate(signal)
         image = signal.kind == IMAGE and not self._json_only
+        if self.ctx.raw_streams >= MAX_RAW_STREAMS:
+            self.set_header("Retry-After", "5")
+            raise tornado.web.HTTPError(503, reason=f"{MAX_RAW_STREAMS} raw-signal streams are open on this "
+                                                    "hub (the most it serves at once): try again later")
+        self.ctx.raw_streams += 1
+        try:
+            await self._stream(thing, raw, signal, period, image, closed)
+        finally:
+            self.ctx.raw_streams -= 1
+
+    async def _stream(self, thing: ServedThing, raw: RawReads, signal: RawSignal, period: float, image: bool,
+                      closed: asyncio.Event) -> None:
         if image:
             self.set_header("Content-Type", f"multipart/x-mixed-replace;boundary={BOUNDARY}")
         else:
