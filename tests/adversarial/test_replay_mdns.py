@@ -20,7 +20,8 @@ WOT_TCP = "_wot._tcp.local."
 def hub(hub_thread, press_scene, tmp_path_factory):
     db = tmp_path_factory.mktemp("replay-mdns") / "hub.db"
     cfg = HubConfig(http_port=0, ws_port=0, database=str(db), history_batch_ms=20,
-                    devices=(press_scene("pad"),), discovery=DiscoveryConfig(mdns=True, browse=False, interfaces=("127.0.0.1",)))
+                    devices=(press_scene("pad"),),
+                    discovery=DiscoveryConfig(mdns=True, browse=False, interfaces=("127.0.0.1",)))
     ht = hub_thread(cfg).start()
     yield ht
     ht.stop()
