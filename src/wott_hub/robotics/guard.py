@@ -13,9 +13,10 @@ its descriptor is never closed under it).
   waiting in the kernel (``tx_queue``) at every tick for ``STALL_S``, or for as long as the hub logged
   ``CLIENT_MAX_BYTES`` to the endpoint, is cut: its queue can hold no more than what was logged while
   it stalled (plus one tick). More than ``MAX_CLIENTS`` at once: the newest are cut.
-- ``InvalidMessages``, a filter on the SDK's client logger: the first ``LOG_BURST`` invalid-message
-  lines a minute are logged, the rest counted (``LogRate``); a client that sends ``INVALID_MAX``
-  invalid messages is cut and named once.
+- ``InvalidMessages``, a filter on the SDK's client loggers: the first ``LOG_BURST`` invalid-message
+  lines a minute are logged, the rest counted (``LogRate``), and so are the send errors a closed
+  client's queued replies cause; a client that sends ``INVALID_MAX`` invalid messages is cut and
+  named once.
 Counters go to ``health()``.
 """
 
@@ -51,8 +52,9 @@ MAX_CLIENTS = 32
 INVALID_MAX = 20
 """Invalid messages a client may send before it is cut (a real client sends none)."""
 LOG_BURST = 10
-SDK_CLIENT_LOGGER = "foxglove.websocket.connected_client"
+SDK_CLIENT_LOGGERS = ("foxglove.websocket.connected_client", "foxglove.websocket.connected_client.poller")
 _INVALID = re.compile(r"Invalid message from (\S+):(\d+):")
+_SEND_ERROR = re.compile(r"Error sending message to client")
 
 
 def client_sockets(port: int) -> dict[str, tuple[int, int]]:
@@ -110,15 +112,18 @@ class InvalidMessages(logging.Filter):
     def __init__(self, on_abuse: Callable[[int], None]) -> None:
         super().__init__()
         self.rate = LogRate(log, LOG_BURST, 60.0, "invalid Foxglove messages", logging.WARNING)
+        # a client closed with its error statuses still queued: the SDK logs each one it cannot send
+        self.send_rate = LogRate(log, LOG_BURST, 60.0, "Foxglove send errors", logging.WARNING)
         self.by_port: dict[int, int] = {}
         self.on_abuse = on_abuse
         self.count = 0
         self._lock = threading.Lock()
 
     def filter(self, record: logging.LogRecord) -> bool:
-        m = _INVALID.search(record.getMessage())
+        text = record.getMessage()
+        m = _INVALID.search(text)
         if m is None:
-            return True
+            return _SEND_ERROR.search(text) is None or self.send_rate.allow()
         port = int(m.group(2))
         with self._lock:
             self.count += 1
@@ -142,14 +147,17 @@ class FoxgloveGuard:
         self.cut_many = 0
         self.cut_invalid = 0
         self.filter = InvalidMessages(self._abusive)
-        self._logger = logging.getLogger(SDK_CLIENT_LOGGER)
+        self._loggers = [logging.getLogger(name) for name in SDK_CLIENT_LOGGERS]
 
     def install(self) -> None:
-        self._logger.addFilter(self.filter)
+        for logger in self._loggers:
+            logger.addFilter(self.filter)
 
     def uninstall(self) -> None:
-        self._logger.removeFilter(self.filter)
+        for logger in self._loggers:
+            logger.removeFilter(self.filter)
         self.filter.rate.flush()
+        self.filter.send_rate.flush()
 
     def _abusive(self, remote_port: int) -> None:
         """Called in the SDK's thread that logged the line: cut at once, there (waiting for the hub's
@@ -193,4 +201,5 @@ class FoxgloveGuard:
     def health(self) -> dict[str, Any]:
         return {"clients": len(self.clients), "closedSlow": self.cut_slow, "closedOverLimit": self.cut_many,
                 "closedInvalid": self.cut_invalid, "invalidMessages": self.filter.count,
-                "invalidNotLogged": self.filter.rate.suppressed}
+                "invalidNotLogged": self.filter.rate.suppressed,
+                "sendErrorsNotLogged": self.filter.send_rate.suppressed}
