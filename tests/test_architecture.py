@@ -159,7 +159,7 @@ LAYERS: dict[str, int] = {
     "discovery": 5,
     "runtime": 6,
     "history": 7, "web": 7, "servient": 7, "security": 7, "mqtt": 7, "robotics": 7,
-    "network": 8, "config": 8, "config_docs": 8,
+    "network": 8, "config": 8, "config_docs": 8, "config_rules": 8,
     "hub": 9,
     "cli": 10, "plugin_api": 10, "": 10,  # "": the package face, wott_hub/__init__.py
 }

@@ -161,6 +161,8 @@ class HubConfig:
             raise ConfigError(f"{path}: cannot read: {e.strerror or e}") from None
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        except RecursionError:  # tomllib parses nesting by recursion: a hostile file ends it (issue 48)
+            raise ConfigError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
         cfg = cls.from_dict(data, source=str(path))
         db = cfg.database
         if "://" not in db and not Path(db).is_absolute():  # relative to the config file
@@ -253,18 +255,20 @@ def _devices(tables: Any, source: str, errors: list[str]) -> list[Any]:
     from wott_hub.plugins.model import DeviceTable
 
     parsed = []
-    ids: set[str] = set()
+    ids: dict[str, str] = {}  # casefold -> the first id written so
     for i, dev in enumerate(tables):
         where = f"{source}: device[{i}]"
         if found := problems(DeviceTable, dev, where):
             errors += found
             continue
         cfg = DeviceConfig.from_table(dev, where=where)
-        if cfg.id in ids:
-            errors.append(f"{where}.id: {cfg.id!r} is used by another device")
-        elif cfg.id == "hub":
+        key = cfg.id.casefold()  # ids are one regardless of case: URLs, addDevice, WebSocket names
+        if key in ids:
+            same = "" if ids[key] == cfg.id else f" ({ids[key]!r}: ids are compared regardless of case)"
+            errors.append(f"{where}.id: {cfg.id!r} is used by another device{same}")
+        elif key == "hub":
             errors.append(f"{where}.id: 'hub' is the hub's own Thing; choose another id")
-        ids.add(cfg.id)
+        ids.setdefault(key, cfg.id)
         parsed.append(cfg)
     return parsed
 

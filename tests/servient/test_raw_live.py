@@ -43,15 +43,17 @@ def test_the_tds_declare_the_raw_signals_with_their_media_types(hub):
     image = pad["properties"]["rawImage"]
     assert image["uriVariables"]["camera"]["enum"] == ["camera"] and image["type"] == "string"
     types = [f["contentType"] for f in image["forms"]]
-    assert types == ["application/json", "image/png", "image/jpeg", "application/x-npy",
+    assert types == ["application/json", "image/png", "image/jpeg", "application/x-npy", "application/json",
                      "multipart/x-mixed-replace;boundary=frame"]
+    observe = image["forms"][-2]  # the plain observe form first: wotpy observes through it (issue 48)
+    assert observe["href"].endswith("/properties/rawImage/observe") and observe["subprotocol"] == "sse"
     stream = image["forms"][-1]
     assert stream["op"] == ["observeproperty", "unobserveproperty"] and stream["subprotocol"] == "stream"
     assert "{?camera,maxRate}" in stream["href"]
     assert "{" not in image["forms"][0]["href"]  # wotpy reads its first form as is
     assert "pressureGrid" in grid["properties"] and "rawImage" not in grid["properties"]
     assert [f["contentType"] for f in grid["properties"]["pressureGrid"]["forms"]] == [
-        "application/json", "application/x-npy", "application/json"]
+        "application/json", "application/x-npy", "application/json", "application/json"]
     assert "rawImageRecorded" not in pad["events"]  # not recorded unless the device opts in
     everything = httpx.get(f"{hub.url}/wot/pad-cam/properties").json()
     assert "rawImage" not in everything and "skinShape" in everything  # never encoded for a bulk read

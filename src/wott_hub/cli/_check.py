@@ -190,10 +190,13 @@ def check_usb(cfg: HubConfig, registry: Registry | None = None) -> list[str]:
 
 
 def check_files(cfg: HubConfig) -> list[str]:
-    """What the config names outside itself, read as the hub will read it: the history database's URL
-    (its scheme and driver; a file path needs nothing), the token file, the TLS pair."""
+    """The rules across tables the hub applies when it is built (``config_rules``), and what the config
+    names outside itself, read as the hub will read it: the history database's URL (its scheme and
+    driver; a file path needs nothing), the token file, the TLS pair."""
+    from wott_hub.config_rules import startup_problems
+
     sec = cfg.security
-    out = []
+    out = startup_problems(cfg)  # what the hub refuses when it is built: `run` and `config check` alike
     if cfg.history and "://" in cfg.database:
         from wott_hub.errors import HistoryError
         from wott_hub.history.db import create_engine, database_url

@@ -74,6 +74,7 @@ def run(
     import logging
 
     from wott_hub.config import ConfigError, HubConfig, check_port
+    from wott_hub.config_rules import startup_problems
 
     from ._check import check_files
     from .config import load_checked
@@ -103,7 +104,7 @@ def run(
     if foxglove_port is not None:
         changes["foxglove"] = dataclasses.replace(cfg.foxglove, port=foxglove_port)
     cfg = dataclasses.replace(cfg, **changes)  # checked again, as a file's values are
-    if sec and (problems := check_files(cfg)):
+    if problems := check_files(cfg) if sec else startup_problems(cfg):  # with the command line's values
         raise ConfigError("\n".join(problems))
 
     from wott_hub.hub import serve
@@ -121,7 +122,8 @@ def run(
     try:
         asyncio.run(serve(cfg, ready=ready))
     except OSError as e:  # typically a port in use
-        typer.echo(f"error: {e} (choose other ports with --port/--ws-port or in [hub])", err=True)
+        hint = "" if "(choose" in str(e) else " (choose other ports with --port/--ws-port or in [hub])"
+        typer.echo(f"error: {e}{hint}", err=True)
         raise typer.Exit(1) from None
     _end_process()
 

@@ -11,7 +11,10 @@ writes a busy stream makes one by one), and no record overtakes a queued one.
 A consumer that falls ``max_pending`` records behind is cut off instead of
 slowing the hub down or growing memory without bound; an SSE client then
 reconnects with ``Last-Event-ID`` and is served the rest from history, so it
-loses nothing.
+loses nothing. Cut off means disconnected (issue 48): its pending records are
+let go at once and its ``cut`` callback (the consumer's socket close) runs, so
+a client that stopped reading cannot keep its task waiting on a backed-up
+socket with a batch and the socket's buffer pinned in memory.
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ class Subscriber:
         self._bucket = Bucket(DIRECT_RATE, DIRECT_BURST)
         self._backfill: AsyncIterator[list[Record]] | None = None
         self._on_close = on_close
+        self.cut: Callable[[], None] | None = None  # the consumer's disconnect, run when it overflows
 
     def wants(self, rec: Record) -> bool:
         kind, name = self.interest
@@ -71,14 +75,25 @@ class Subscriber:
                 self.last_seq = rec.seq
                 return
         if len(self.pending) >= self.max_pending:
-            self.overflowed = True
-            self.close()
+            self.overflow()
             return
         self.pending.append(rec)
         self._direct = None  # the consumer sends what is queued first: no record may overtake it
         wake = self._wake
         if wake is not None and not wake.done():
             wake.set_result(None)
+
+    def overflow(self) -> None:
+        """Cut off: the pending records let go, the subscription closed, the consumer disconnected."""
+        self.overflowed = True
+        self.pending.clear()
+        self.close()
+        cut, self.cut = self.cut, None
+        if cut is not None:
+            try:
+                cut()
+            except Exception:  # a consumer's bug must not reach the publisher
+                pass
 
     def close(self) -> None:
         if self.closed:

@@ -149,7 +149,7 @@ class Devices:
 
     def _check_free(self, tid: str) -> None:
         check_device_id(tid, "device id")  # every binding's syntax (plugins.model), whoever opened it
-        if tid in self.things.server.things.by_id:
+        if self.things.server.things.get(tid) is not None:  # regardless of case (ThingRegistry)
             raise Conflict(f"device id {tid!r} is already served")
 
     async def _add(self, desc: DeviceDescription, pipeline: DevicePipeline, worker: WorkerDevice | None, *,

@@ -30,10 +30,10 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from wott_hub.config import HubConfig
-from wott_hub.errors import InvalidInput, NotFound
+from wott_hub.config_rules import startup_problems
+from wott_hub.errors import ConfigError, InvalidInput, NotFound
 from wott_hub.events.plane import EventPlane
 from wott_hub.network import HubNetwork
-from wott_hub.robotics.config import check_bind as check_foxglove_bind
 from wott_hub.security import AuditLog, build_policy
 from wott_hub.security.tls import server_context
 from wott_hub.servient import HUB_THING_ID, HubServer, ServedThing, hub_td
@@ -67,9 +67,11 @@ class Hub:
         self.config = cfg = config or HubConfig()
         self._plane = EventPlane(ring_size=cfg.ring_size, max_pending=cfg.max_pending,
                                 durability=cfg.history_durability)
-        # who may do what, TLS (wott_hub.security): a ConfigError here refuses an open non-loopback hub
-        self._policy = build_policy(cfg.security, cfg.host)
-        check_foxglove_bind(cfg.foxglove, cfg.security.insecure)  # [foxglove] off loopback: only if told
+        # the rules across tables (an open non-loopback hub, [foxglove] off loopback, two endpoints on one
+        # port): the same list `wott-hub config check` prints (config_rules.py), refused as one ConfigError
+        if problems := startup_problems(cfg):
+            raise ConfigError("\n".join(problems))
+        self._policy = build_policy(cfg.security, cfg.host)  # who may do what, TLS (wott_hub.security)
         self._audit = AuditLog()
         self._server = HubServer(self._plane, host=cfg.host, http_port=cfg.http_port, ws_port=cfg.ws_port,
                                 public_host=cfg.public_host, catalogue_port=cfg.catalogue_port,
@@ -197,6 +199,7 @@ class Hub:
             self._foxglove = FoxgloveLive(self.config.foxglove, self._plane, name=self.config.name, tls=tls)
             self._server.on_expose.append(self._foxglove.exposed)
             self._server.on_remove.append(self._foxglove.removed)
+            self._status.foxglove = self._foxglove
         self._foxglove.start()
 
     async def __aenter__(self) -> Hub:

@@ -136,17 +136,22 @@ class FleetManagement:
                 "actions": self.actions.declared(dev)}
 
     def _check_free(self, device_id: str) -> None:
-        if device_id == HUB_THING_ID:
+        if device_id.casefold() == HUB_THING_ID:
             raise Conflict(f"'id': {device_id!r} is the hub's own Thing")
-        if device_id in self.devices.things.server.things.by_id:
-            raise Conflict(f"'id': {device_id!r} is already served on this hub")
-        if device_id in self.devices.failed:
+        served = self.devices.things.server.things.get(device_id)  # ids regardless of case (ThingRegistry)
+        if served is not None:
+            raise Conflict(f"'id': {device_id!r} is already served on this hub (as {served.id!r}: ids are "
+                           "compared regardless of case)")
+        if device_id.casefold() in {d.casefold() for d in self.devices.failed}:
             raise Conflict(f"'id': {device_id!r} is a configured device that failed to open "
                            "(remove it first)")
 
     async def remove(self, device_id: Any) -> dict[str, Any]:
         """``removeDevice``: stop retrying it, or stop and unserve it."""
         device_id = _id(device_id)
+        served = self.devices.things.server.things.get(device_id)
+        if served is not None:  # its id as served, whatever the case it was given in
+            device_id = served.id
         self.retrying.cancel(device_id)
         if device_id in self.devices.running:
             self.actions.cancel_reopen(device_id)

@@ -49,6 +49,7 @@ class HubStatus:
         self.hub_state = hub_state  # starting | ok | stopping | stopped
         self.started_at = 0.0
         self.mqtt: MqttPublisher | None = None  # set by [mqtt]: the broker link's health is the hub's
+        self.foxglove: Any = None  # set by [foxglove]: its clients and what it sent (robotics/live.py)
         self._task: asyncio.Task[None] | None = None
 
     def expose(self, things: Things, td: dict[str, Any]) -> None:
@@ -98,6 +99,8 @@ class HubStatus:
             out["mqtt"] = mqtt = self.mqtt.health()
             if mqtt["state"] != "ok" and out["state"] == "ok":
                 out["state"] = "degraded"
+        if self.foxglove is not None:
+            out["foxglove"] = self.foxglove.health()
         return out
 
     def counters(self) -> dict[str, Any]:

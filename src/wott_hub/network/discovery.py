@@ -83,6 +83,7 @@ class HubDiscovery:
         self.failed: dict[str, str] = {}  # foreign TD id -> why adopting it failed
         self._names: dict[str, str] = {}  # served Thing id -> full mDNS instance name
         self._tasks: set[asyncio.Task[Any]] = set()
+        self._announcing: dict[str, asyncio.Task[Any]] = {}  # served Thing id -> its announce, while it runs
         self.started = False
 
     # --- where mDNS runs ---------------------------------------------------------------
@@ -190,7 +191,12 @@ class HubDiscovery:
     def exposed(self, thing_id: str) -> None:
         if self.announcer is None:
             return
-        self._spawn(self._announce_thing(thing_id))
+        task = asyncio.ensure_future(self._announce_thing(thing_id))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        self._announcing[thing_id] = task
+        task.add_done_callback(lambda t: self._announcing.pop(thing_id, None) if self._announcing.get(
+            thing_id) is t else None)
 
     async def _announce_thing(self, thing_id: str) -> None:
         if thing_id in self._names:
@@ -213,6 +219,11 @@ class HubDiscovery:
         self._names[thing_id] = full
 
     def removed(self, thing_id: str) -> None:
+        announcing = self._announcing.pop(thing_id, None)
+        if announcing is not None and not announcing.done():
+            # still probing (~0.75 s): cancelled, it is never announced (issue 48: a replay stopped at once
+            # was announced ~1.2 s later, then withdrawn); once registered, the withdraw below says goodbye
+            announcing.cancel()
         name = self._names.pop(thing_id, None)
         if name is not None and self.announcer is not None:
             self._spawn(self.announcer.withdraw(name))

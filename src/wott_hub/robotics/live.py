@@ -8,11 +8,16 @@ Contract (docs/robotics.md):
 - nothing is built for nobody: a Thing's tap on the event plane (``EventPlane.add_tap``) is active
   only while a client subscribes to one of its channels, and only the subscribed channels'
   messages are made. The mesh and ``/tf`` are sent when a client subscribes to them (the protocol
-  has no latching), and the mesh again every ``MESH_EVERY_S``;
+  has no latching), and the mesh again every ``MESH_EVERY_S``; static data is encoded once (the
+  mesh's bytes are kept per Thing) and sent at most once per ``STATIC_MIN_S`` per topic however
+  many clients subscribe (issue 48: every subscribe rebuilt and resent the whole barrel mesh to
+  every subscriber, 986 MB in 30 s from one client subscribing in a loop);
 - scenes at most ``scene_hz`` per device, the latest state drawn when its slot comes (a timer on
   the hub's loop); raw channels carry every record, as the hub published it;
 - the hub is never slowed or stopped by a client: the SDK runs the sockets in its own threads,
-  each client has its own queue (``backlog`` messages; a slow client loses its oldest, alone);
+  each client has its own queue (``backlog`` messages; a slow client loses its oldest, alone), and
+  ``guard.FoxgloveGuard`` bounds it in bytes: a client that stops reading is cut, so are clients
+  beyond ``MAX_CLIENTS`` and one that sends invalid messages (whose log lines are sampled);
   a client's bad request (garbage, an unknown channel) gets an error status from the SDK and
   changes nothing for the others; a mapping error is logged and counted, never raised into the
   plane's publish.
@@ -37,6 +42,7 @@ from foxglove.websocket import ChannelView, Client, ServerListener
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
 
 from .channel import Channel, Out
+from .guard import TICK_S, FoxgloveGuard
 from .mapping import CONTACTS, LOG_EVENTS, FleetMapping
 from .nagle import disable_nagle
 from .names import TF_TOPIC
@@ -48,9 +54,12 @@ if TYPE_CHECKING:
 
     from .config import FoxgloveConfig
 
-__all__ = ["FoxgloveLive"]
+__all__ = ["STATIC_MIN_S", "FoxgloveLive"]
 
 log = logging.getLogger("wott_hub.foxglove")
+
+STATIC_MIN_S = 1.0
+"""A topic's static data (a mesh, ``/tf``) is sent at most this often, however many subscribe."""
 
 
 class _Listener(ServerListener):
@@ -98,7 +107,13 @@ class FoxgloveLive:
         self.subscribers: dict[str, int] = {}  # topic -> clients subscribed
         self.active: dict[str, int] = {}  # Thing -> subscriptions to its channels
         self.sent = 0
+        self.bytes = 0  # logged to the endpoint (what a stalled client's queue can hold at most)
         self.errors = 0
+        self.guard: FoxgloveGuard | None = None
+        self._ticker: asyncio.TimerHandle | None = None
+        self._meshes: dict[str, bytes] = {}  # Thing -> its mesh scene, encoded once
+        self._static_last: dict[str, float] = {}  # topic -> when its static data was last sent
+        self._static_due: set[str] = set()  # topics whose static data is scheduled
         self._loop: asyncio.AbstractEventLoop | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at = 0
@@ -110,16 +125,41 @@ class FoxgloveLive:
         self._loop = asyncio.get_running_loop()
         self.context = foxglove.Context()
         cert, key = self.tls if self.tls is not None else (None, None)
-        self.server = foxglove.start_server(
-            name=self.name, host=self.cfg.host, port=self.cfg.port, context=self.context,
-            server_listener=_Listener(self), capabilities=[],
-            message_backlog_size=self.cfg.backlog, tls_cert=cert, tls_key=key)
+        try:
+            self.server = foxglove.start_server(
+                name=self.name, host=self.cfg.host, port=self.cfg.port, context=self.context,
+                server_listener=_Listener(self), capabilities=[],
+                message_backlog_size=self.cfg.backlog, tls_cert=cert, tls_key=key)
+        except RuntimeError as e:  # the SDK's FoxgloveError: a port in use, an address not here
+            import errno
+
+            text = str(e).removeprefix("FoxgloveError: ")
+            code = errno.EADDRINUSE if "in use" in text else errno.EADDRNOTAVAIL
+            raise OSError(code, f"the Foxglove endpoint on {self.cfg.host}:{self.cfg.port}: {text} "
+                                "(choose another with --foxglove-port or [foxglove] port)") from None
         if not disable_nagle(self.port or 0):
             log.warning("Foxglove: the listener on port %s was not found to turn Nagle's algorithm off "
                         "(not Linux?): messages may wait up to 40 ms for the client's ACK", self.port)
         self._channel(self._tf_channel(), "")
+        self.guard = FoxgloveGuard(self.port or 0, lambda: self.bytes, self.call_soon)
+        self.guard.install()
+        self._ticker = self._loop.call_later(TICK_S, self._tick)
+
+    def _tick(self) -> None:
+        if self.guard is None or self._loop is None:
+            return
+        try:
+            self.guard.tick()
+        except Exception:  # the guard's failure must not end the endpoint
+            log.exception("Foxglove: watching the clients failed")
+        self._ticker = self._loop.call_later(TICK_S, self._tick)
 
     def stop(self) -> None:
+        if self._ticker is not None:
+            self._ticker.cancel()
+            self._ticker = None
+        if self.guard is not None:
+            self.guard.uninstall()
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
@@ -167,6 +207,7 @@ class FoxgloveLive:
 
     def removed(self, served: ServedThing) -> None:
         self.mapping.remove(served.id)
+        self._meshes.pop(served.id, None)
         for topic in [t for t, owner in self.owner.items() if owner == served.id]:
             self.channels.pop(topic).close()
             del self.owner[topic]
@@ -220,14 +261,47 @@ class FoxgloveLive:
         n = self.subscribers[topic] = max(0, self.subscribers.get(topic, 0) + change)
         if owner:
             self.active[owner] = max(0, self.active.get(owner, 0) + change)
-        if change > 0 and n:
-            if topic == TF_TOPIC:
-                self._send_transforms()
-            else:
-                m = self.mapping.things.get(owner)
-                mesh = m.enc.channel("mesh") if m is not None else None
-                if m is not None and mesh is not None and mesh.topic == topic:
-                    self._send(m.mesh(time.time_ns()))
+        if change > 0 and n and (topic == TF_TOPIC or self._mesh_topic(owner) == topic):
+            self._static_soon(topic)
+
+    def _mesh_topic(self, owner: str) -> str | None:
+        m = self.mapping.things.get(owner)
+        mesh = m.enc.channel("mesh") if m is not None else None
+        return mesh.topic if mesh is not None else None
+
+    def _static_soon(self, topic: str) -> None:
+        """Send ``topic``'s static data now, or at its next slot (``STATIC_MIN_S``): one send for every
+        subscribe meanwhile (each send goes to every subscriber: the protocol has no per-client send)."""
+        if topic in self._static_due or self._loop is None:
+            return
+        self._static_due.add(topic)
+        wait = max(0.0, self._static_last.get(topic, -STATIC_MIN_S) + STATIC_MIN_S - time.monotonic())
+        self._loop.call_later(wait, self._send_static, topic)
+
+    def _send_static(self, topic: str) -> None:
+        self._static_due.discard(topic)
+        if not self.wanted(topic):
+            return
+        self._static_last[topic] = time.monotonic()
+        if topic == TF_TOPIC:
+            self._send_transforms()
+            return
+        owner = self.owner.get(topic)
+        m = self.mapping.things.get(owner) if owner else None
+        if m is None or owner is None:
+            return
+        now = time.time_ns()
+        encoded = self._meshes.get(owner)
+        if encoded is None:
+            outs = m.mesh(now)  # built and encoded once; the periodic resend (MESH_EVERY_S) builds anew
+            if not outs:
+                return
+            encoded = self._meshes[owner] = outs[0].payload
+        ch = self.channels.get(topic)
+        if ch is not None:
+            ch.log(encoded, log_time=now)
+            self.sent += 1
+            self.bytes += len(encoded)
 
     def wanted(self, topic: str) -> bool:
         return self.subscribers.get(topic, 0) > 0
@@ -242,6 +316,7 @@ class FoxgloveLive:
                 continue  # nobody can be subscribed to it yet
             ch.log(o.payload, log_time=o.t_ns)
             self.sent += 1
+            self.bytes += len(o.payload)
 
     def _send_transforms(self) -> None:
         tf = self.mapping.transforms(time.time_ns())
@@ -294,4 +369,5 @@ class FoxgloveLive:
 
     def health(self) -> dict[str, Any]:
         return {"url": self.url, "channels": len(self.channels),
-                "subscriptions": sum(self.subscribers.values()), "sent": self.sent, "errors": self.errors}
+                "subscriptions": sum(self.subscribers.values()), "sent": self.sent, "errors": self.errors,
+                **(self.guard.health() if self.guard is not None else {})}

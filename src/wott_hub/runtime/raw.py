@@ -26,6 +26,7 @@ import base64
 import io
 import json
 import logging
+import time
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -130,7 +131,12 @@ def encode_sample(signal: RawSignal, sample: RawSample, fmt: str, device: str = 
 
 class RawSource:
     """The raw signals of one device, read through ``sample`` and encoded at most once per frame and
-    format (the ``types.RawReads`` the servient serves)."""
+    format (the ``types.RawReads`` the servient serves).
+
+    A sample is fetched at most twice per frame period of its signal whatever the number of readers
+    (issue 48: each stream fetched its own, a copy of the image from the driver or its worker, and 200
+    streams halved the camera's own rate): readers within half a period share the last sample, and
+    readers arriving while one is fetched wait for it."""
 
     def __init__(self, device: str, signals: tuple[RawSignal, ...], sample: Sampler) -> None:
         self.device = device
@@ -139,13 +145,37 @@ class RawSource:
         self._sample = sample
         self._last: dict[tuple[str, str], Encoded] = {}
         self._making: dict[tuple[str, str, int], asyncio.Future[Encoded]] = {}
+        self._sampled: dict[str, tuple[float, RawSample | None]] = {}  # name -> (when fetched, the sample)
+        self._fetching: dict[str, asyncio.Future[RawSample | None]] = {}
         self.encoded = 0  # encodings made (what readers cost; tests and the hub's counters)
+
+    async def _shared_sample(self, name: str, signal: RawSignal) -> RawSample | None:
+        fresh_s = 0.5 / signal.rate_hz if signal.rate_hz else 0.0
+        got = self._sampled.get(name)
+        if got is not None and time.monotonic() - got[0] < fresh_s:
+            return got[1]
+        pending = self._fetching.get(name)
+        if pending is not None:
+            return await asyncio.shield(pending)
+        fut: asyncio.Future[RawSample | None] = asyncio.get_running_loop().create_future()
+        self._fetching[name] = fut
+        try:
+            sample = await self._sample(name)
+        except BaseException as e:
+            fut.set_exception(e)
+            fut.exception()  # retrieved: a reader that was not waiting must not log it as lost
+            raise
+        finally:
+            self._fetching.pop(name, None)
+        self._sampled[name] = (time.monotonic(), sample)
+        fut.set_result(sample)
+        return sample
 
     async def read(self, name: str, fmt: str) -> Encoded | None:
         """Signal ``name``'s latest sample in ``fmt``; None before its first frame. ``DriverError`` if
         the driver (or its worker) fails to give one."""
         signal = self.by_name[name]
-        sample = await self._sample(name)
+        sample = await self._shared_sample(name, signal)
         if sample is None:
             return None
         key = (name, fmt)

@@ -94,6 +94,7 @@ class BinaryEventHandler(BaseHandler):
         self.ctx.sse.add(self)
         conn = self.request.connection
         stream = conn.stream  # type: ignore[union-attr]  # tornado's HTTP1Connection
+        sub.cut = stream.close  # cut off at max_pending: disconnected, its buffers let go
         try:
             self.set_header("Content-Type", BINARY_EVENTS[name])
             self.set_header("Cache-Control", "no-cache")
@@ -164,6 +165,11 @@ class BinaryEventSocket(tornado.websocket.WebSocketHandler):
 
     async def get(self, *args: Any, **kwargs: Any) -> None:
         thing = _thing(self.ctx, kwargs["thing_id"], kwargs["name"])
+        if self.request.headers.get("Upgrade", "").lower() != "websocket":
+            # tornado answers a plain-text 400 itself: said here as every refusal of the hub is (issue 48)
+            raise tornado.web.HTTPError(400, reason=f"{self.request.path} is a WebSocket: send the upgrade "
+                                                    f"handshake, or GET {self.request.path[:-3]} for the "
+                                                    "packets as one HTTP response")
         after = _after(self.get_query_argument("lastEventId", None))
         if not self.ctx.streams_ready.is_set():
             await self.ctx.streams_ready.wait()
@@ -185,6 +191,10 @@ class BinaryEventSocket(tornado.websocket.WebSocketHandler):
     async def _run(self) -> None:
         sub = self._sub
         assert sub is not None  # subscribed in get(), before the handshake completes
+
+        conn = self.ws_connection
+        if conn is not None and conn.stream is not None:
+            sub.cut = conn.stream.close  # cut off at max_pending: disconnected, its buffers let go
 
         def frames(batch: list[Record]) -> bytes:
             return b"".join([_binary_frame(p) for p in map(packet_of, batch) if p is not None])

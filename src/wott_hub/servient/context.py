@@ -25,6 +25,7 @@ class ServingContext:
     heartbeat_s: float = 15.0
     sse: set[Any] = field(default_factory=set)  # open SSE/long-poll handlers
     ws: set[Any] = field(default_factory=set)  # open WebSocket handlers
+    raw_streams: int = 0  # open raw-signal streams (servient/raw.py: at most MAX_RAW_STREAMS)
     # set once every stream continues its recorded sequence: resumes wait for it
     streams_ready: asyncio.Event = field(default_factory=asyncio.Event)
     _heartbeat: PeriodicCallback | None = None

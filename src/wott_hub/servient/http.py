@@ -185,6 +185,7 @@ class _StreamHandler(_Base):
             # Nagle + delayed ACK would hold small event frames back by up to 40 ms
             stream = _iostream(self.request)
             stream.set_nodelay(True)
+            sub.cut = stream.close  # cut off at max_pending: disconnected (it resumes from history)
             self.set_header("Content-Type", "text/event-stream; charset=utf-8")
             self.set_header("Cache-Control", "no-cache")
             self.set_header("X-Accel-Buffering", "no")

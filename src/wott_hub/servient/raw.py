@@ -5,8 +5,18 @@ image; ``pressureGrid[?format=npy][&signal=<name>]``: a taxel grid; ``magneticFi
 ``taxelForce`` (same parameters): a node's vectors. ``.../stream?camera=&signal=&maxRate=``: a camera's
 images as ``multipart/x-mixed-replace`` JPEG parts (what a browser ``<img>`` shows live), a grid or
 vectors as an SSE stream of JSON messages; at most ``maxRate`` a second and never a frame twice, each
-encoded once whatever the number of readers (``runtime.raw.RawSource``). The TD declares them
+encoded once whatever the number of readers (``runtime.raw.RawSource``). ``.../observe[?camera=&signal=]``:
+the observe form every observable property has (issue 48 item 12): with ``Accept: text/event-stream`` an
+SSE stream of the JSON values at the default rate, else one long-poll answer, the next frame's JSON
+(after ``LONG_POLL_S`` without one: the latest), which is what wotpy 0.18's HTTP client (it requests a
+form's href as it is, and cannot expand ``{?maxRate}``) reads in a loop. The TD declares them
 (``td.raw``, ``td.forms``).
+
+At most ``MAX_RAW_STREAMS`` streams are open at once on a hub (issue 48: 200 streams, or 300 a client
+never read, halved the camera devices' own rates); beyond, a 503 problem+json with ``Retry-After``.
+
+Every stream ends when its Thing stops being served (``removeDevice``, issue 48 item 7), as the event
+streams do: each turn checks that the Thing it reads is still the one served under its id.
 
 Bad input is refused before anything is read, with a 400 problem+json naming the parameter: a
 ``format`` the signal has not, a ``camera`` or ``signal`` the device has not, a ``maxRate`` that is not a
@@ -35,9 +45,14 @@ from .context import ServingContext
 from .http import SSE_OPEN, BaseHandler
 from .things import ServedThing
 
-__all__ = ["BOUNDARY", "RawPropertyHandler", "RawStreamHandler"]
+__all__ = ["BOUNDARY", "LONG_POLL_S", "MAX_RAW_STREAMS", "RawObserveHandler", "RawPropertyHandler",
+           "RawStreamHandler"]
 
 BOUNDARY = "frame"
+MAX_RAW_STREAMS = 16
+"""Raw-signal streams open at once (each sends a camera's JPEG up to its frame rate from the hub's loop)."""
+LONG_POLL_S = 10.0
+"""How long a long-poll ``/observe`` waits for a frame newer than the one it found: then the latest."""
 _FORMATS = {IMAGE: ("json", "png", "jpeg", "npy"), GRID: ("json", "npy"), VECTORS: ("json", "npy")}
 
 
@@ -124,13 +139,26 @@ class RawStreamHandler(_RawBase):
     JPEG parts of a ``multipart/x-mixed-replace`` response (images), SSE messages (grids)."""
 
     _closed: asyncio.Event | None = None
+    _json_only = False  # the observe form: JSON values (an image as its base64 PNG) on SSE
 
     async def get(self, thing_id: str, name: str) -> None:
         closed = self._closed = asyncio.Event()
-        _, raw = self.raw_of(thing_id, name)
+        thing, raw = self.raw_of(thing_id, name)
         signal = self.signal(raw, name)
         period = 1.0 / self.max_rate(signal)
-        image = signal.kind == IMAGE
+        image = signal.kind == IMAGE and not self._json_only
+        if self.ctx.raw_streams >= MAX_RAW_STREAMS:
+            self.set_header("Retry-After", "5")
+            raise tornado.web.HTTPError(503, reason=f"{MAX_RAW_STREAMS} raw-signal streams are open on this "
+                                                    "hub (the most it serves at once): try again later")
+        self.ctx.raw_streams += 1
+        try:
+            await self._stream(thing, raw, signal, period, image, closed)
+        finally:
+            self.ctx.raw_streams -= 1
+
+    async def _stream(self, thing: ServedThing, raw: RawReads, signal: RawSignal, period: float, image: bool,
+                      closed: asyncio.Event) -> None:
         if image:
             self.set_header("Content-Type", f"multipart/x-mixed-replace;boundary={BOUNDARY}")
         else:
@@ -142,7 +170,7 @@ class RawStreamHandler(_RawBase):
         self.ctx.sse.add(self)  # ended with the others at shutdown (``end_stream``)
         last = -1
         try:
-            while not closed.is_set():
+            while not closed.is_set() and self.served(thing):
                 started = time.monotonic()
                 enc = await self.encoded(raw, signal, "jpeg" if image else "json")
                 if enc is not None and enc.t_ns != last:
@@ -163,6 +191,10 @@ class RawStreamHandler(_RawBase):
         if not self._finished and not _closed(self.request):
             self.finish()
 
+    def served(self, thing: ServedThing) -> bool:
+        """Is ``thing`` still the Thing served under its id (not removed, not replaced)?"""
+        return self.ctx.things.get(thing.id) is thing
+
     def heartbeat(self, now: float, every_s: float) -> None:
         """Streams write at their own rate (``ServingContext`` beats SSE streams; nothing to add here)."""
 
@@ -172,6 +204,45 @@ class RawStreamHandler(_RawBase):
 
     def on_connection_close(self) -> None:
         self.end_stream()
+
+
+class RawObserveHandler(RawStreamHandler):
+    """``.../observe``: an SSE stream of JSON values (``Accept: text/event-stream``), else one long-poll
+    answer: the first frame newer than the one there when asked (within ``LONG_POLL_S``, else the latest)."""
+
+    _json_only = True
+
+    async def get(self, thing_id: str, name: str) -> None:
+        if "text/event-stream" in self.request.headers.get("Accept", ""):
+            await super().get(thing_id, name)
+            return
+        closed = self._closed = asyncio.Event()
+        thing, raw = self.raw_of(thing_id, name)
+        signal = self.signal(raw, name)
+        period = 1.0 / max(signal.rate_hz or DEFAULT_RATE_HZ, DEFAULT_RATE_HZ)
+        first = await self.encoded(raw, signal, "json")
+        enc = first
+        deadline = time.monotonic() + LONG_POLL_S
+        self.ctx.sse.add(self)
+        try:
+            while (enc is None or (first is not None and enc.t_ns == first.t_ns)) \
+                    and time.monotonic() < deadline and not closed.is_set() and self.served(thing):
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(closed.wait(), period)
+                enc = await self.encoded(raw, signal, "json")
+        finally:
+            self.ctx.sse.discard(self)
+        if _closed(self.request):
+            return
+        if not self.served(thing):
+            raise tornado.web.HTTPError(404, reason=f"Thing {thing_id!r} was removed")
+        if enc is None:
+            self.set_header("Retry-After", "1")
+            raise tornado.web.HTTPError(503, reason=f"{name} {signal.name!r}: no frame yet")
+        self.set_header("Content-Type", enc.content_type)
+        self.set_header("Cache-Control", "no-store")
+        self.set_header("X-Timestamp-Ns", str(enc.t_ns))
+        self.finish(enc.body)
 
 
 def _closed(request: HTTPServerRequest) -> bool:

@@ -15,7 +15,7 @@ from .binary import BinaryEventHandler, BinaryEventSocket
 from .context import ServingContext
 from .forms import PREFIX
 from .http import routes as http_routes
-from .raw import RawPropertyHandler, RawStreamHandler
+from .raw import RawObserveHandler, RawPropertyHandler, RawStreamHandler
 
 __all__ = ["routes"]
 
@@ -27,6 +27,7 @@ def routes(ctx: ServingContext) -> list[tuple[Any, ...]]:
     raw = "|".join(sorted(RAW_PROPERTIES))
     return [
         (rf"{t}/properties/(?P<name>{raw})/stream", RawStreamHandler, k),
+        (rf"{t}/properties/(?P<name>{raw})/observe", RawObserveHandler, k),
         (rf"{t}/properties/(?P<name>{raw})", RawPropertyHandler, k),
         (rf"{t}/events/(?P<name>[^/]+)/binary/ws", BinaryEventSocket, k),
         (rf"{t}/events/(?P<name>[^/]+)/binary", BinaryEventHandler, k),

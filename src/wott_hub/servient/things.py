@@ -101,30 +101,40 @@ def _json_object(items: Iterable[tuple[str, str]]) -> str:
 
 
 class ThingRegistry:
-    """Served Things by id and by the URL-safe name wotpy routes WebSockets with."""
+    """Served Things by id and by the URL-safe name wotpy routes WebSockets with.
+
+    One rule for ids (issue 48): they are compared regardless of case everywhere (``GET /wot/PAD``
+    serves ``Pad``, ``addDevice`` of ``PAD`` is a 409 beside it, a config with ``X`` and ``x`` is
+    refused), because the WebSocket name (``slugify``) and MQTT topics fold case anyway."""
 
     def __init__(self) -> None:
         self.by_id: dict[str, ServedThing] = {}
         self.by_ws_name: dict[str, ServedThing] = {}
+        self._folded: dict[str, ServedThing] = {}  # id.casefold() -> Thing
 
     def add(self, thing: ServedThing, ws_name: str) -> None:
-        if thing.id in self.by_id:
-            raise ValueError(f"a Thing with id {thing.id!r} is already served")
+        same = self._folded.get(thing.id.casefold())
+        if same is not None:
+            raise ValueError(f"a Thing with id {same.id!r} is already served (ids are compared regardless "
+                             "of case)")
         if ws_name in self.by_ws_name:
             raise ValueError(f"Thing id {thing.id!r} collides with {self.by_ws_name[ws_name].id!r} "
                              f"in WebSocket URLs ({ws_name!r}): choose ids that differ after slugify")
         self.by_id[thing.id] = thing
         self.by_ws_name[ws_name] = thing
+        self._folded[thing.id.casefold()] = thing
 
     def remove(self, thing_id: str) -> ServedThing | None:
         thing = self.by_id.pop(thing_id, None)
         if thing is not None:
             for k in [k for k, v in self.by_ws_name.items() if v is thing]:
                 del self.by_ws_name[k]
+            self._folded.pop(thing.id.casefold(), None)
         return thing
 
     def get(self, thing_id: str) -> ServedThing | None:
-        return self.by_id.get(thing_id)
+        """The Thing served under ``thing_id``, whatever its case."""
+        return self.by_id.get(thing_id) or self._folded.get(thing_id.casefold())
 
     def __iter__(self) -> Iterator[ServedThing]:
         return iter(self.by_id.values())

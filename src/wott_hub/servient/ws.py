@@ -14,8 +14,10 @@ methods, messages, subscription ids and error codes, so wotpy's
   (encoded once for every consumer), so no re-encoding and no validation of
   what the hub itself produced;
 - subscriptions served by the event plane (only the matching records reach a
-  subscription; a subscription that falls ``max_pending`` behind gets a
-  subscription error, as wotpy reports one);
+  subscription; a subscription that falls ``max_pending`` behind means the
+  client stopped reading its socket: the connection is closed at once, its
+  buffers let go (issue 48: an error message queued behind the backlog pinned
+  it all), and the client reconnects as after any drop);
 - property reads answered from the encoded values of the served Thing;
 - the messages of a batch framed here and written to the socket in one write
   (tornado's ``write_message`` creates a task and makes a ``send`` call per
@@ -268,6 +270,9 @@ class FastWebsocketHandler(WebsocketHandler):
                 return
             sub = self.ctx.plane.subscribe(thing, interest)
             self._hub_subs[sid] = sub
+        conn = self.ws_connection
+        if conn is not None and conn.stream is not None:
+            sub.cut = conn.stream.close  # cut off at max_pending: the connection closed, its buffers let go
         kind, name = interest
         if kind == KIND_EVENT:
             head = '{"subscription":"' + sid + '","name":' + _dumps(name) + ',"data":'
@@ -316,8 +321,7 @@ class FastWebsocketHandler(WebsocketHandler):
             sub.close()
             ours = self._hub_subs.pop(sid, None) is not None  # not disposed by the client
         if sub.overflowed:
-            self._send(_error("subscriber too slow: subscription closed", WebsocketErrors.SUBSCRIPTION_ERROR,
-                              data={"subscription": sid}))
+            pass  # the connection was closed (``sub.cut``): nothing more can reach this client
         elif ours and self.ws_connection is not None and thing not in self.ctx.things.by_id:
             self._ended(sid, thing)
 

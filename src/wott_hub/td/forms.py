@@ -145,16 +145,21 @@ class FormLayout:
 
 def _raw_forms(href: str, name: str) -> list[dict[str, Any]]:
     """A raw signal's forms: JSON first and with a plain href (wotpy reads a property through its first HTTP
-    form, as it is, and decodes JSON), then the binary media types, then the stream."""
+    form, as it is, and decodes JSON), then the binary media types, then the observe form every observable
+    property has (plain href, SSE or long-poll of JSON: wotpy 0.18 observes through the first observe form,
+    requesting its href as it is: a templated ``{?maxRate}`` first was a 404, issue 48), then the stream."""
     read = {"op": ["readproperty"], "htv:methodName": "GET"}
-    observe = {"op": ["observeproperty", "unobserveproperty"], "htv:methodName": "GET", "subprotocol": STREAM}
+    ops = ["observeproperty", "unobserveproperty"]
+    plain = {"href": f"{href}/observe", "op": ops, "htv:methodName": "GET", "subprotocol": "sse",
+             "contentType": JSON}
+    observe = {"op": ops, "htv:methodName": "GET", "subprotocol": STREAM}
     if name == RAW_IMAGE:
         return [{"href": href, **read, "contentType": JSON},
                 {"href": f"{href}?format=png{{&camera}}", **read, "contentType": "image/png"},
                 {"href": f"{href}?format=jpeg{{&camera}}", **read, "contentType": "image/jpeg"},
-                {"href": f"{href}?format=npy{{&camera}}", **read, "contentType": NPY},
+                {"href": f"{href}?format=npy{{&camera}}", **read, "contentType": NPY}, plain,
                 {"href": f"{href}/stream{{?camera,maxRate}}", **observe, "contentType": MULTIPART}]
     return [{"href": href, **read, "contentType": JSON},
-            {"href": f"{href}?format=npy{{&signal}}", **read, "contentType": NPY},
+            {"href": f"{href}?format=npy{{&signal}}", **read, "contentType": NPY}, plain,
             {"href": f"{href}/stream{{?signal,maxRate}}", **observe, "subprotocol": "sse",
              "contentType": JSON}]
