@@ -152,4 +152,5 @@ class WriterLoop:
             log.error("%s", self.lease.lost)
             with self.queue.lock:
                 records = self.queue.drain()
+                self.queue.settle(records)
             self.tally.drop(records)
