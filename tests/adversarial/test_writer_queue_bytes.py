@@ -68,14 +68,10 @@ def fill(folder: Path) -> int:
 
 def hub_pid(uv_pid: int) -> int:
     """The hub's process: ``uv run``'s child (``uv`` itself when it exec'd), not the batch process."""
-    try:
-        children = Path(f"/proc/{uv_pid}/task/{uv_pid}/children").read_text().split()
-    except FileNotFoundError:
-        children = []
-    for pid in children:
-        cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
-        if b"wott-hub" in cmd:
-            return int(pid)
+    for task in Path(f"/proc/{uv_pid}/task").iterdir():  # uv starts it from any of its threads
+        for pid in (task / "children").read_text().split():
+            if b"wott-hub" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                return int(pid)
     return uv_pid
 
 
@@ -165,8 +161,10 @@ def test_a_full_disk_under_raw_images_keeps_the_writer_queue_in_its_byte_budget(
     log, last = m["log"], m["healths"][-1]
     queued = max(h["queuedBytes"] for h in m["healths"])
     growth = (m["samples"][-1][1] - m["samples"][0][1]) / max(m["attack_s"], 1e-9)
+    at_drop = [rss for t, rss in m["samples"] if t >= (m["dropped_after_s"] or 0.0)]
     print(f"history_queue_mb {QUEUE_MB}: RSS rest {m['rest_rss_mb']:.0f} MB, peak {m['peak_rss_mb']:.0f} MB "
-          f"(net {growth:+.2f} MB/s over {m['attack_s']:.1f} s); dropped after {m['dropped_after_s']} s; "
+          f"(net {growth:+.2f} MB/s over {m['attack_s']:.1f} s; {at_drop[0]:.0f} -> {at_drop[-1]:.0f} MB "
+          f"once dropping); dropped after {m['dropped_after_s']:.1f} s; "
           f"queuedBytes max {queued / 1e6:.1f} MB; dropped {last['dropped']}, errors {last['errors']}; "
           f"pad {m['rest_pad_hz']:.1f} -> {m['pad_hz']:.1f} events/s (longest gap {m['pad_gap_s']:.2f} s); "
           f"stop {m['stop_s']:.1f} s")
