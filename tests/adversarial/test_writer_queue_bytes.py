@@ -9,7 +9,10 @@ file: every write of the database and of the spool fails for real ("database or 
 Measured: the hub's resident memory stays under twice its rest level (before the bound the queue grew by
 the camera's bytes until the 524,288-record cap, over 100 GB of images); health names the problem
 (degraded, the errors, ``lastError``, records ``dropped``, ``queuedBytes`` within the budget); the
-bystander keeps streaming over SSE; SIGTERM stops the hub within its bounded stop, without a traceback.
+bystander keeps streaming over SSE; SIGTERM stops the hub within its bounded stop, saying what was not
+recorded, without a traceback. Found by it: the queue's bytes went past the budget (18 MB for 16) while
+a spill or a failed batch was out of it; the plane's ring kept every uncommitted image (up to 65,536);
+the writer's three tries at stop waited 10 s of backoff, so stop left it behind.
 
 The tmpfs needs root (CI runs as root): without it the test fails naming it, it is not skipped.
 """
@@ -187,4 +190,6 @@ def test_a_full_disk_under_raw_images_keeps_the_writer_queue_in_its_byte_budget(
     # a bounded stop, no traceback
     assert m["rc"] is not None, f"the hub still runs 60 s after SIGTERM: {log[-3000:]}"
     assert m["stop_s"] < 30, f"the stop took {m['stop_s']:.1f} s"
+    assert "records were not recorded" in log, log[-3000:]  # said at stop, not dropped without a word
+    assert "did not finish" not in log, log[-3000:]  # the writer ended: not left behind by stop's timeout
     assert "Traceback" not in log, log[-3000:]
