@@ -239,11 +239,17 @@ def test_the_queue_is_bounded_in_bytes_and_counts_them_back_as_records_leave():
     assert len(taken) == 8 and q.bytes == 8 * each and len(q) == 8
     assert q.wake.is_set()  # a batch is full
     batch = q.take()
-    assert [r.seq for r in batch] == [1, 2, 3, 4, 5] and q.bytes == 3 * each and q.inflight == [batch]
-    assert [q.offer(r) for r in recs[8:14]] == [True] * 5 + [False]  # room for what left, no more
-    q.requeue(batch, [batch])  # failed: back at the head (past the bound: it was admitted), counted again
-    assert q.bytes == sum(map(record_bytes, recs[:13])) and q.inflight == []
-    assert [r.seq for r in q.drain()] == list(range(1, 14))
+    assert [r.seq for r in batch] == [1, 2, 3, 4, 5] and q.bytes == 8 * each and q.inflight == [batch]
+    assert not q.offer(recs[8])  # in flight still counts: a failed batch put back stays within the bound
+    q.requeue(batch, [batch])  # failed: back at the head
+    assert q.bytes == 8 * each and q.inflight == [] and len(q) == 8
+    batch = q.take()
+    q.requeue(batch[3:], [batch])  # three written, two left: only the written ones leave the count
+    assert q.bytes == 5 * each and [q.offer(r) for r in recs[8:12]] == [True] * 3 + [False]
+    records = q.drain()
+    assert [r.seq for r in records] == list(range(4, 12))
+    assert q.bytes == sum(map(record_bytes, records))  # until settled
+    q.settle(records)
     assert q.bytes == 0
     small = RecordQueue(max_records=3, max_bytes=1 << 30, batch_max=100)
     assert [small.offer(r) for r in recs[:4]] == [True, True, True, False]  # and in records

@@ -339,3 +339,28 @@ def test_a_record_the_writer_refuses_or_fails_on_is_queued_and_none_overtakes_it
         task.cancel()
 
     asyncio.run(main())
+
+
+def test_what_history_has_not_committed_is_kept_beyond_the_ring_up_to_a_byte_cap():
+    """Issue 48, item 4: a raw camera's images on a full disk are never committed; the ring kept 65,536
+    of them (~16 GB). Beyond ``ring_max`` it keeps uncommitted records up to ``ring_hold_bytes``, never
+    fewer than ``ring_max``, the newest."""
+    plane = EventPlane(ring_size=4)
+    plane.ring_hold_bytes = 10_000
+    hist = ListHistory(plane)
+    plane.history_sink = plane.history_source = hist
+    plane.add_stream("cam", record=True, start_after=0)
+    image = "x" * 1_000
+    for _ in range(8):
+        plane.publish("cam", KIND_EVENT, "image", 0, image)
+    st = plane.stream("cam")
+    assert len(st.ring) == 8 and st.ring_bytes == 8_000  # under the cap: all kept for resumes
+    for _ in range(100):
+        plane.publish("cam", KIND_EVENT, "image", 0, image)
+    assert len(st.ring) == 10 and st.ring_bytes == 10_000 and st.ring[-1].seq == 108
+    big = "y" * 50_000
+    for _ in range(6):
+        plane.publish("cam", KIND_EVENT, "image", 0, big)
+    assert len(st.ring) == 4 and st.ring_bytes == 4 * 50_000  # over the cap, never under ring_max
+    hist.commit()
+    assert len(st.ring) == 4 and st.ring_bytes == sum(len(r.data) for r in st.ring)

@@ -106,6 +106,7 @@ class Stream:
     committed: int = 0  # everything <= this is in history (or will never be)
     ring: deque[Record] = field(default_factory=deque)
     ring_max: int = RING_UNRECORDED  # the plane's ring size for this Thing (it trims down to it)
+    ring_bytes: int = 0  # the ring's records' data, in characters (its hard cap in bytes)
     held: deque[Record] = field(default_factory=deque)  # durability "committed": not yet delivered
     subs: dict[Interest, list[Subscriber]] = field(default_factory=dict)
     taps: list[Tap] = field(default_factory=list)
@@ -121,6 +122,10 @@ class EventPlane:
     commit_wait_s = 10.0  # how long a resume waits for history to commit its backlog
 
     max_held = 1_000_000  # per Thing, "committed" mode: beyond, the oldest held are not delivered live
+    ring_hold_bytes = 32_000_000
+    """Per Thing, what the ring keeps beyond ``ring_max`` while history has not committed it, at most
+    (and at most 16 x ``ring_max`` records): a raw camera's records on a full disk (never committed)
+    kept 65,536 images, ~16 GB (issue 48, item 4)."""
 
     def __init__(self, *, ring_size: int | None = None, max_pending: int = 100_000,
                  durability: str = "fast") -> None:
@@ -212,6 +217,7 @@ class EventPlane:
         st.counts[rec.name] += 1
         ring = st.ring
         ring.append(rec)
+        st.ring_bytes += len(rec.data)
         if len(ring) > st.ring_max:
             self._trim(st)
         if st.record and self.history_sink is not None:
@@ -238,12 +244,13 @@ class EventPlane:
             if tap.active:
                 tap(rec)
 
-    @staticmethod
-    def _trim(st: Stream) -> None:
-        """Down to ``ring_max``, keeping what history has not committed (up to a hard cap)."""
+    def _trim(self, st: Stream) -> None:
+        """Down to ``ring_max``, keeping what history has not committed (up to a hard cap, in records
+        and in bytes)."""
         ring, committed, size = st.ring, st.committed, st.ring_max
-        while len(ring) > size and (ring[0].seq <= committed or len(ring) > max(size * 16, 65536)):
-            ring.popleft()
+        while len(ring) > size and (ring[0].seq <= committed or len(ring) > max(size * 16, 65536)
+                                    or st.ring_bytes > self.ring_hold_bytes):
+            st.ring_bytes -= len(ring.popleft().data)
 
     def on_committed(self, watermarks: dict[str, int]) -> None:
         """History has written (or given up on) every record up to these seqs."""

@@ -91,7 +91,9 @@ class StoreAndForward:
             if q.abandoned or not len(q):
                 return
             records = q.drain()
-            if not self.spill_records(records):
+            if self.spill_records(records):
+                q.settle(records)
+            else:
                 q.put_back(records)  # kept in memory (bounded by the queue's bounds)
 
     def spill_held(self) -> None:
@@ -107,6 +109,8 @@ class StoreAndForward:
             if held and not self.spill_records(held):
                 q.inflight = taken  # the disk refused: still held, reported at stop
                 q.put_back(held[sum(len(b) for b in taken):])
+            else:
+                q.settle(held)
 
     def abandon(self) -> None:
         """``stop`` gave up on the thread (stuck in the database): the batches it holds and the queue
@@ -121,6 +125,8 @@ class StoreAndForward:
             q.inflight.clear()
             if held and not self.spill_records(held):
                 q.hold(held)  # reported as not recorded
+            else:
+                q.settle(held)
         finally:
             q.lock.release()
 

@@ -13,7 +13,10 @@ weighs (a raw camera image is ~250 kB, a taxel packet ~1 kB: 524,288 images woul
 100 GB). Beyond either, ``offer`` refuses and the writer counts the record as dropped. The bytes
 are an estimate (``record_bytes``: the payload's text, a skin packet's arrays, a fixed share for
 the objects), counted on the event loop's side when a record comes in and under ``lock`` when
-it leaves, so neither side needs the other's lock.
+it leaves the writer's memory (``settle``: written, spooled or given up), so neither side needs
+the other's lock. A record taken off for a batch or a spill still counts until then: else, while
+a failing batch is retried or a spill is encoded, the queue would fill its budget again and the
+records put back would take it past (measured on a full disk: 18 MB queued for 16).
 """
 
 from __future__ import annotations
@@ -56,14 +59,14 @@ class RecordQueue:
         self.abandoned = False  # stop() gave up waiting: the thread must not touch queue or spool
         self._q: deque[Record] = deque()
         self._added = 0  # bytes offered (the event loop's side)
-        self._removed = 0  # bytes taken off (under ``lock``)
+        self._removed = 0  # bytes settled: written, spooled or given up (under ``lock``)
 
     def __len__(self) -> int:
         return len(self._q)
 
     @property
     def bytes(self) -> int:
-        """The estimated bytes waiting (``record_bytes``), batches in flight not counted."""
+        """The estimated bytes the writer holds (``record_bytes``): queued, in flight, being spilled."""
         return self._added - self._removed
 
     def offer(self, rec: Record) -> bool:
@@ -83,9 +86,7 @@ class RecordQueue:
 
     def _pop(self, n: int) -> list[Record]:
         q = self._q
-        out = [q.popleft() for _ in range(n)]
-        self._removed += sum(map(record_bytes, out))
-        return out
+        return [q.popleft() for _ in range(n)]
 
     def take(self) -> list[Record]:
         """The next batch off the queue, kept in ``inflight`` until it is done."""
@@ -99,32 +100,40 @@ class RecordQueue:
             return batch
 
     def drain(self) -> list[Record]:
-        """Everything queued, taken off (``lock`` held; a record submitted meanwhile stays queued)."""
+        """Everything queued, taken off (``lock`` held; a record submitted meanwhile stays queued); its
+        bytes count until ``settle`` (or ``put_back``)."""
         return self._pop(len(self._q))
 
     def put_back(self, records: list[Record]) -> None:
         """``records`` back at the head of the queue, in their order (``lock`` held)."""
-        self._q.extendleft(reversed(records))
-        self._removed -= sum(map(record_bytes, records))
+        self._q.extendleft(reversed(records))  # still counted: never settled
 
     def hold(self, records: list[Record]) -> None:
         """``records`` at the tail, past the bounds (``lock`` held): kept only to be reported at stop."""
         self._q.extend(records)
-        self._removed -= sum(map(record_bytes, records))
+
+    def settle(self, records: list[Record]) -> None:
+        """``records``, taken off, have left the writer's memory (written, spooled, given up): their
+        bytes no longer count (``lock`` held)."""
+        self._removed += sum(map(record_bytes, records))
 
     def done(self, *batches: list[Record]) -> None:
         with self.lock:
             for b in batches:
                 if any(x is b for x in self.inflight):
                     self.inflight = [x for x in self.inflight if x is not b]
+                    self.settle(b)
 
     def requeue(self, records: list[Record], batches: list[list[Record]]) -> None:
         """``records`` (what is left of ``batches``) back at the head of the queue, retried first."""
         with self.lock:
             held = [x for x in self.inflight if any(x is b for b in batches)]
             self.inflight = [x for x in self.inflight if not any(x is b for b in batches)]
+            gone = sum(record_bytes(r) for b in held for r in b)
             if not self.abandoned and len(held) == len(batches):  # else spooled already (stop, hurry)
                 self.put_back(records)
+                gone -= sum(map(record_bytes, records))
+            self._removed += gone  # what of the batches was written
 
     @property
     def held(self) -> int:

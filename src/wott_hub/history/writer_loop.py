@@ -134,7 +134,9 @@ class WriterLoop:
                     failures_at_stop += 1
                     if not len(q) or failures_at_stop >= 3:  # stop() must end: the rest is reported
                         return
-                q.wake.wait(backoff)  # a stop or a hurry cuts it short
+                # a stop or a hurry cuts it short; stopping, the three tries are not spaced out: each
+                # fails at once on a full disk, and their backoff (0.1 + 5 + 5 s) outlasted stop's 10 s
+                q.wake.wait(min(backoff, 0.5) if stopping else backoff)
                 q.wake.clear()
                 backoff = min(backoff * 2, 5.0)
                 continue
@@ -152,4 +154,5 @@ class WriterLoop:
             log.error("%s", self.lease.lost)
             with self.queue.lock:
                 records = self.queue.drain()
+                self.queue.settle(records)
             self.tally.drop(records)
