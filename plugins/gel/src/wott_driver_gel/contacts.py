@@ -14,8 +14,8 @@ its rim splits into arcs), of at least ``min_area_mm2`` are contacts. A componen
   weighted centroid sits on the axis, and it does not jump when an edge pixel crosses the
   threshold (the mask's own centroid does);
 - **radius** is that of the disc with the area where the change exceeds ``radius_fraction`` of
-  the component's peak (the contact edge of a ball press, found against Taxim's hand-labelled
-  radii: ``wott-hub bench gel``, docs/gel.md).
+  the component's peak (its 99th percentile: one pixel's maximum is noise), the contact edge of a
+  ball press, found against Taxim's hand-labelled radii (``wott-hub bench gel``, docs/gel.md).
 
 Positions are pixel (x = column, y = row) here; the driver turns them into mm.
 """
@@ -42,6 +42,7 @@ class ContactParams:
     drift_sigma_px: float = 0.0  # the low-frequency part's Gaussian, px (0: none)
     drift_iters: int = 3
     join_k: float = 0.5
+    peak_pct: float = 99.0  # the component's peak for ``radius_fraction``: this percentile of its change
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,7 +155,9 @@ def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, sm
         peak = float(wts.max())
         cx = float(xs @ wts) / total
         cy = float(ys @ wts) / total
-        core = int(np.count_nonzero(wts > p.radius_fraction * peak))
-        out.append(PixelContact(cx, cy, float(np.sqrt(core / np.pi)), peak, area))
+        top = peak if p.peak_pct >= 100 else float(np.percentile(wts, p.peak_pct))
+        core = int(np.count_nonzero(wts > p.radius_fraction * top))
+        rad = float(np.sqrt(core / np.pi))
+        out.append(PixelContact(cx, cy, rad, peak, area))
     out.sort(key=lambda c: (c.y, c.x))
     return out, mag
