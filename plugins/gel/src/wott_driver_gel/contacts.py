@@ -9,10 +9,11 @@ its connected components, the fragments of one contact joined (``join``: compone
 under ``join_k`` times the larger one's radius: a press whose change dips below the threshold across
 its rim splits into arcs), of at least ``min_area_mm2`` are contacts. A component's
 
-- **centre** is the change-weighted centroid of the pixels inside it: the colour change of a
-  pressed gel is strongest on the slopes of the dent and symmetric about its axis, so the
-  weighted centroid sits on the axis, and it does not jump when an edge pixel crosses the
-  threshold (the mask's own centroid does);
+- **centre** is the centroid of the pixels inside it weighted by their change above the
+  threshold: the colour change of a pressed gel is strongest on the slopes of the dent and
+  symmetric about its axis, so the weighted centroid sits on the axis, and it does not jump when
+  an edge pixel crosses the threshold (it enters with weight 0; the mask's own centroid jumps),
+  nor is it pulled far by a wide weak rim;
 - **radius** is that of the disc with the area where the change exceeds ``radius_fraction`` of
   the component's peak (its 99th percentile: one pixel's maximum is noise), the contact edge of a
   ball press, found against Taxim's hand-labelled radii (``wott-hub bench gel``, docs/gel.md).
@@ -151,10 +152,10 @@ def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, sm
         if area < p.min_area_px:
             continue
         wts = mag[ys, xs].astype(np.float64)
-        total = float(wts.sum())
         peak = float(wts.max())
-        cx = float(xs @ wts) / total
-        cy = float(ys @ wts) / total
+        above = wts - thr  # a pixel crossing the threshold enters with weight 0: no jump
+        cx = float(xs @ above) / float(above.sum())
+        cy = float(ys @ above) / float(above.sum())
         top = peak if p.peak_pct >= 100 else float(np.percentile(wts, p.peak_pct))
         core = int(np.count_nonzero(wts > p.radius_fraction * top))
         rad = float(np.sqrt(core / np.pi))
