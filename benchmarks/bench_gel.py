@@ -81,6 +81,10 @@ def accuracy(name: str, ps: PressSet, series: bool) -> tuple[list[list[str]], di
             e, lab = est[a:b], ps.centres_px[a:b]
             m[f"spread_{a}"] = spread(e) * k
             m[f"label_spread_{a}"] = spread(lab) * k
+        # the floor: a perfect estimate of each pressed site (its labels' mean) scored against the labels
+        dev = np.concatenate([np.hypot(*(ps.centres_px[a:b] - ps.centres_px[a:b].mean(axis=0)).T)
+                              for a, b in SERIES])
+        m["label_floor_mm"] = float(np.median(dev)) * k
     return rows, m
 
 
@@ -186,7 +190,9 @@ def main() -> None:
     body += ("\n\nWithin each series of the Mini set (the same site pressed deeper and deeper), the spread "
              "of the estimated centres (RMS distance from the series' mean) against the labels' own: "
              f"presses 0-12 {m['spread_0']:.3f} mm (labels {m['label_spread_0']:.3f}), presses 13-23 "
-             f"{m['spread_13']:.3f} mm (labels {m['label_spread_13']:.3f}).\n")
+             f"{m['spread_13']:.3f} mm (labels {m['label_spread_13']:.3f}). The labels' floor: each series' "
+             "mean label (the pressed site, as well as the labels tell it) scored against the labels has a "
+             f"median centre error of {m['label_floor_mm']:.3f} mm.\n")
     depth_rows, note = depth(load_taxim("gelsight_mini"))
     body += "\n" + note + "\n\n" + markdown_table(["GelSight Mini depth", "value"], depth_rows) + "\n"
     if not args.no_timing:

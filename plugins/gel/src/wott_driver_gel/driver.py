@@ -47,6 +47,12 @@ class GelEstimate:
     shear: np.ndarray | None = None  # (N, 2) mm, the nodes' in-plane displacement (a marker gel)
 
 
+# The scale of the illumination drift taken out of the colour change (``contacts.drift_free``): 1.2 mm
+# (40 px on Taxim's Mini frames), the smallest of 0.6 / 1.2 / 2.4 mm that leaves the Mini presses'
+# radii as they were (0.6 mm cuts into a 1-2 mm contact: 54 % within 15 % instead of 71 %).
+DRIFT_SIGMA_MM = 1.2
+
+
 class GelEstimator:
     """The rest reference and the contact finder of one gel (pixels in, mm out)."""
 
@@ -71,7 +77,8 @@ class GelEstimator:
         sigma = 2.0
         params = ContactParams(min_change=s.min_change, min_area_px=area_px,
                                radius_fraction=s.radius_fraction, sigma_px=sigma,
-                               open_px=max(3, int(round(0.15 / mm_per_px)) | 1))  # ~0.15 mm, odd
+                               open_px=max(3, int(round(0.15 / mm_per_px)) | 1),  # ~0.15 mm, odd
+                               drift_sigma_px=DRIFT_SIGMA_MM / mm_per_px)
         from wott_hub.plugin_api import MATERIALS
 
         return cls(mm_per_px, params, RestCollector(s.rest_frames, s.rest_max_change, sigma), calibration,
