@@ -277,7 +277,8 @@ def main() -> None:
 The demo's three skins at {FPS} frames/s (skin packet, displacement packet and contacts per frame, an
 action every 2 s) and a 640 x 480 camera recording {args.camera_hz:g} image/s, written through
 `HistoryWriter` into SQLite ({db_mb * scale:.0f} MB an hour, built in {build_s:.0f} s), exported whole by
-the command (one episode, {args.codec}, a process of its own; peak RSS from `wait4`). Target: ≤ 60 s an hour, memory bounded. The command said: {said}
+the command (one episode, {args.codec}, a process of its own; peak RSS from `wait4`).
+Target: ≤ 60 s an hour, memory bounded. The command said: {said}
 
 {table}
 
