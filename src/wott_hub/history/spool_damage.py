@@ -11,6 +11,8 @@ import stat
 from pathlib import Path
 from typing import IO, Any, Protocol
 
+from wott_hub.errors import HistoryError
+
 __all__ = ["NotRegular", "SetAside", "kind", "open_lock"]
 
 log = logging.getLogger("wott_hub.history.spool")
@@ -26,7 +28,7 @@ class ReadOutcome(Protocol):
     header: bool
 
 
-class NotRegular(Exception):
+class NotRegular(HistoryError):
     """A spool entry that is not a regular file (a FIFO, a device, a symlink): never read."""
 
 
