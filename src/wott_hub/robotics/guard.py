@@ -29,12 +29,11 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from wott_hub.security.lograte import LogRate
 
-from .nagle import ESTABLISHED
+from .nagle import ESTABLISHED, descriptors_of, tcp_sockets
 
 __all__ = ["CLIENT_MAX_BYTES", "INVALID_MAX", "MAX_CLIENTS", "STALL_S", "TICK_S", "FoxgloveGuard",
            "client_sockets"]
@@ -60,40 +59,25 @@ _SEND_ERROR = re.compile(r"Error sending message to client")
 def client_sockets(port: int) -> dict[str, tuple[int, int]]:
     """This process's established TCP sockets on local ``port``: inode -> (remote port, bytes waiting
     to be sent or acknowledged)."""
-    out: dict[str, tuple[int, int]] = {}
-    for table in ("tcp", "tcp6"):
-        try:
-            lines = Path(f"/proc/self/net/{table}").read_text().splitlines()[1:]
-        except OSError:
-            continue
-        for line in lines:
-            f = line.split()
-            if f[3] != ESTABLISHED or int(f[1].rpartition(":")[2], 16) != port:
-                continue
-            out[f[9]] = (int(f[2].rpartition(":")[2], 16), int(f[4].partition(":")[0], 16))
-    return out
+    return {inode: (int(f[2].rpartition(":")[2], 16), int(f[4].partition(":")[0], 16))
+            for inode, f in tcp_sockets(port, ESTABLISHED).items()}
 
 
 def _cut(inodes: set[str]) -> int:
     """``shutdown`` the sockets with these inodes (their descriptors stay the SDK's); how many."""
     done = 0
-    for fd in os.listdir("/proc/self/fd") if inodes else ():
+    for fd in descriptors_of(inodes):
         try:
-            target = os.readlink(f"/proc/self/fd/{fd}")
+            dup = socket.socket(fileno=os.dup(fd))
         except OSError:
             continue
-        if target.startswith("socket:[") and target[8:-1] in inodes:
-            try:
-                dup = socket.socket(fileno=os.dup(int(fd)))
-            except OSError:
-                continue
-            try:
-                dup.shutdown(socket.SHUT_RDWR)
-                done += 1
-            except OSError:
-                pass
-            finally:
-                dup.close()
+        try:
+            dup.shutdown(socket.SHUT_RDWR)
+            done += 1
+        except OSError:
+            pass
+        finally:
+            dup.close()
     return done
 
 

@@ -21,13 +21,15 @@ import os
 import socket
 from pathlib import Path
 
-__all__ = ["ESTABLISHED", "LISTEN", "descriptors", "disable_nagle"]
+__all__ = ["ESTABLISHED", "LISTEN", "descriptors", "descriptors_of", "disable_nagle", "tcp_sockets"]
 
 LISTEN, ESTABLISHED = "0A", "01"  # the kernel's TCP states as /proc/net/tcp writes them
 
 
-def _inodes(port: int, state: str) -> set[str]:
-    inodes = set()
+def tcp_sockets(port: int, state: str) -> dict[str, list[str]]:
+    """This process's TCP sockets on local ``port`` in ``state``: inode -> their ``/proc/net/tcp``
+    fields (2: the remote address, 4: ``tx_queue:rx_queue``, in hex)."""
+    found: dict[str, list[str]] = {}
     for table in ("tcp", "tcp6"):
         try:
             lines = Path(f"/proc/self/net/{table}").read_text().splitlines()[1:]
@@ -35,15 +37,13 @@ def _inodes(port: int, state: str) -> set[str]:
             continue
         for line in lines:
             fields = line.split()
-            local, st, inode = fields[1], fields[3], fields[9]
-            if st == state and int(local.rpartition(":")[2], 16) == port:
-                inodes.add(inode)
-    return inodes
+            if fields[3] == state and int(fields[1].rpartition(":")[2], 16) == port:
+                found[fields[9]] = fields
+    return found
 
 
-def descriptors(port: int, state: str = LISTEN) -> list[int]:
-    """This process's descriptors of TCP sockets on local ``port`` in ``state``."""
-    inodes = _inodes(port, state)
+def descriptors_of(inodes: set[str] | dict[str, list[str]]) -> list[int]:
+    """This process's descriptors of the sockets with these inodes."""
     found = []
     for fd in os.listdir("/proc/self/fd") if inodes else ():
         try:
@@ -53,6 +53,11 @@ def descriptors(port: int, state: str = LISTEN) -> list[int]:
         if target.startswith("socket:[") and target[8:-1] in inodes:
             found.append(int(fd))
     return found
+
+
+def descriptors(port: int, state: str = LISTEN) -> list[int]:
+    """This process's descriptors of TCP sockets on local ``port`` in ``state``."""
+    return descriptors_of(tcp_sockets(port, state))
 
 
 def disable_nagle(port: int) -> int:
