@@ -17,6 +17,7 @@ real ``wott-hub run``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -255,3 +256,19 @@ def unblock_fifo(path: Path) -> None:
     except OSError:  # nobody is reading it
         return
     os.close(fd)
+
+
+@contextlib.contextmanager
+def small_disk(folder: Path, size: str):
+    """A tmpfs of ``size`` (mount's spelling: "8k", "16m") at ``folder``: a disk the test fills, unmounted
+    at the end (lazily if something still holds it). Root only, as CI runs: without it the test fails
+    saying so, it is not skipped."""
+    if os.geteuid() != 0:
+        pytest.fail("a full disk is a tmpfs mounted by the test: run it as root (CI does)", pytrace=False)
+    folder.mkdir(parents=True, exist_ok=True)
+    subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)], check=True)
+    try:
+        yield folder
+    finally:
+        if subprocess.run(["umount", str(folder)], capture_output=True).returncode != 0:
+            subprocess.run(["umount", "-l", str(folder)], check=False)

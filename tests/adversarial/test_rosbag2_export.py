@@ -16,7 +16,6 @@ root, as CI does).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import signal
 import subprocess
@@ -31,19 +30,6 @@ from . import surroundings as S
 
 WOTT_HUB = str(Path(sys.executable).parent / "wott-hub")
 STOP_S = 15.0
-
-
-@contextlib.contextmanager
-def _small_disk(path: Path, size: str):
-    """A tmpfs of ``size`` at ``path`` (root: CI runs the suite as root)."""
-    if os.geteuid() != 0:
-        pytest.fail("a full disk is a tmpfs mounted by the test: run it as root (CI does)", pytrace=False)
-    path.mkdir(parents=True, exist_ok=True)
-    subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], check=True)
-    try:
-        yield path
-    finally:
-        subprocess.run(["umount", "-l", str(path)], check=False)
 
 
 def _config(folder: Path, database: str, rate_hz: float = 60.0) -> Path:
@@ -127,7 +113,7 @@ def test_a_full_disk_leaves_no_partial_bag(recorded, tmp_path):
     whole = sum(p.stat().st_size for p in (tmp_path / "whole").iterdir())
     left = {}
     for size in ("8k", f"{whole // 2048}k"):  # full at the first writes, and half way through the bag
-        with _small_disk(tmp_path / f"disk-{size}", size) as disk:
+        with S.small_disk(tmp_path / f"disk-{size}", size) as disk:
             rc, _, err = _finish(_export(recorded, disk / "bag", tmp_path))
             left[size] = sorted(os.listdir(disk))
             print(f"full disk ({size}): exit {rc}, {err.strip()!r}, left {left[size]}")
@@ -137,7 +123,7 @@ def test_a_full_disk_leaves_no_partial_bag(recorded, tmp_path):
 
 def test_a_stop_with_the_database_and_spool_on_a_full_disk_is_bounded_and_says_what_was_lost(
         tmp_path, running_hub, eventually):
-    with _small_disk(tmp_path / "disk", "1m") as disk:
+    with S.small_disk(tmp_path / "disk", "1m") as disk:
         hub = running_hub(["-c", str(_config(tmp_path, str(disk / "hub.db"), 120.0))], tmp_path)
         try:
             hub.ready(60)

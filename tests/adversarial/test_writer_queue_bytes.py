@@ -19,19 +19,15 @@ The tmpfs needs root (CI runs as root): without it the test fails naming it, it 
 
 from __future__ import annotations
 
-import contextlib
 import errno
-import os
 import signal
 import statistics
-import subprocess
 import textwrap
 import time
 from pathlib import Path
 from typing import Any
 
 import httpx
-import pytest
 
 from . import surroundings as S
 
@@ -40,20 +36,6 @@ DISK_MB = 256  # room for the start and a few seconds of images at rest, then fi
 REST_S = 4.0
 ATTACK_S = 40.0  # at most: the queue's budget is reached within seconds at the camera's rate
 AFTER_DROP_S = 6.0  # sampled this long once records are dropped (the bound holding, not just reached)
-
-
-@contextlib.contextmanager
-def small_disk(folder: Path, size_mb: int):
-    """A tmpfs of ``size_mb`` at ``folder``, unmounted at the end (lazily if something still holds it)."""
-    folder.mkdir()
-    if os.geteuid() != 0:
-        pytest.fail("mounting a tmpfs needs root (CI runs as root)", pytrace=False)
-    subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size_mb}m", "tmpfs", str(folder)], check=True)
-    try:
-        yield folder
-    finally:
-        if subprocess.run(["umount", str(folder)], capture_output=True).returncode != 0:
-            subprocess.run(["umount", "-l", str(folder)], check=False)
 
 
 def fill(folder: Path) -> int:
@@ -108,7 +90,7 @@ def attack(folder: Path, running_hub: Any, eventually: Any, queue_mb: float,
     """The scenario: at rest, then the disk full for ``attack_s`` at most (or until records have been
     dropped for ``AFTER_DROP_S``); then SIGTERM. What was measured."""
     out: dict[str, Any] = {}
-    with small_disk(folder / "disk", DISK_MB) as disk:
+    with S.small_disk(folder / "disk", f"{DISK_MB}m") as disk:
         hub = running_hub(["-c", str(config(folder, queue_mb))], folder)
         pad = None
         try:
