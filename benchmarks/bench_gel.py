@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from gel_latency import latency
 from report import markdown_table, write_section
 from wott_driver_gel.evaluation import PressSet, load_taxim, write_recording
 from wott_driver_gel.settings import open_gel
@@ -124,9 +125,38 @@ def depth(ps: PressSet) -> tuple[list[list[str]], str]:
     return rows, note
 
 
-def timing() -> list[list[str]]:
+def sensor_cases() -> dict[str, tuple[np.ndarray, np.ndarray, float]]:
+    """family -> (rest frame, press frames, fps): a Mini's 320 x 240 shaped from the real frames, a DIGIT's
+    real background with modelled presses."""
     import cv2
     from wott_driver_gel.model import press_image
+
+    ps = load_taxim("gelsight_mini")
+    shared = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+    bg = cv2.imread(str(shared / "digit" / "bg_digit_240_320.jpg"))
+    return {
+        "gelsight-mini": (cv2.resize(ps.background, (320, 240), interpolation=cv2.INTER_AREA),
+                          np.stack([cv2.resize(p, (320, 240), interpolation=cv2.INTER_AREA)
+                                    for p in ps.presses]), 25.0),
+        "digit": (bg, np.stack([press_image(bg, 120, 160, r_mm=2.0, depth_mm=0.1 * (1 + i % 8),
+                                            mm_per_px=0.0782, seed=i) for i in range(24)]), 60.0),
+    }
+
+
+def through_hub() -> str:
+    """The two sensors played at their rates by a real hub (``gel_latency``), as a table."""
+    with tempfile.TemporaryDirectory() as tmp:
+        folders = {}
+        for family, (rest, presses, fps) in sensor_cases().items():
+            device = "digit" if family == "digit" else "mini"
+            folders[device] = Path(tmp) / device
+            write_recording(folders[device], rest, np.concatenate([presses] * int(fps)))  # ~48 s each
+        rows = latency(folders)
+    return markdown_table(["through a real hub (`wott-hub run`)", "events", "value", "period"], rows)
+
+
+def timing() -> list[list[str]]:
+    import cv2
     from wott_driver_gel.sources import decode_reduced, shape_mini
 
     ps = load_taxim("gelsight_mini")
@@ -143,18 +173,8 @@ def timing() -> list[list[str]]:
             ts.append(time.process_time() - t)
         rows.append([f"Mini 3280x2464 JPEG decode + shape, {label}", f"{1e3 * np.median(ts):.1f} ms",
                      f"{100 * 25 * np.median(ts):.0f} % at 25 fps"])
-    # processing per frame, Mini 320x240 shaped from the real frames, DIGIT on its real background
-    shared = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-    bg = cv2.imread(str(shared / "digit" / "bg_digit_240_320.jpg"))
-    cases = {
-        "gelsight-mini": (cv2.resize(ps.background, (320, 240), interpolation=cv2.INTER_AREA),
-                          np.stack([cv2.resize(p, (320, 240), interpolation=cv2.INTER_AREA)
-                                    for p in ps.presses]), 25.0),
-        "digit": (bg, np.stack([press_image(bg, 120, 160, r_mm=2.0, depth_mm=0.1 * (1 + i % 8),
-                                            mm_per_px=0.0782, seed=i) for i in range(24)]), 60.0),
-    }
     total = 0.0
-    for family, (rest, presses, fps) in cases.items():
+    for family, (rest, presses, fps) in sensor_cases().items():
         with tempfile.TemporaryDirectory() as tmp:
             folder = Path(tmp) / "f"
             write_recording(folder, rest, np.concatenate([presses] * 4))
@@ -180,8 +200,12 @@ def timing() -> list[list[str]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--no-timing", action="store_true", help="accuracy only (no CPU measurements)")
+    ap.add_argument("--hub-only", action="store_true", help="only the run through a real hub (printed)")
     ap.add_argument("--no-write", action="store_true", help="print only; leave docs/benchmarks.md alone")
     args = ap.parse_args()
+    if args.hub_only:
+        print(through_hub())
+        return
     header = ["set", "detected", "background contacts", "centre error median, mm", "p90, mm",
               "radius / label (median)", "radius within 15 %"]
     mini_rows, m = accuracy("GelSight Mini (taxim, 24 presses)", load_taxim("gelsight_mini"), True)
@@ -197,6 +221,7 @@ def main() -> None:
     body += "\n" + note + "\n\n" + markdown_table(["GelSight Mini depth", "value"], depth_rows) + "\n"
     if not args.no_timing:
         body += "\n" + markdown_table(["what", "CPU per frame", "share of one core"], timing()) + "\n"
+        body += "\n" + through_hub() + "\n"
     print(body)
     if not args.no_write:
         cmd = "uv run wott-hub bench gel" + (" --no-timing" if args.no_timing else "")
