@@ -8,9 +8,10 @@ recording is taken as it was recorded: the shaping below is the sensor's, not a 
 The sensors (UVC cameras; none of this was tried on a device, docs/gel.md):
 
 - ``MiniCamera``: a GelSight Mini's MJPEG stream at its native 3280 x 2464, asked for undecoded
-  (``CAP_PROP_CONVERT_RGB`` off, where the V4L2 backend gives the JPEG bytes) and decoded at a
-  quarter scale by libjpeg's DCT scaling (``cv2.IMREAD_REDUCED_COLOR_4``: 820 x 616, a fraction of
-  a full decode's cost), then shaped as the maker's software shapes it (``shape_mini``).
+  (``CAP_PROP_CONVERT_RGB`` off, where the V4L2 backend gives the JPEG bytes) and decoded at an
+  eighth of its scale by libjpeg's DCT scaling (``MINI_DECODE_SCALE``, ``cv2.IMREAD_REDUCED_COLOR_8``:
+  410 x 308, an eighth of a full decode's cost), then shaped as the maker's software shapes it
+  (``shape_mini``).
 - ``DigitCamera``: a DIGIT at one of digit-interface's streams, its LED set through the control
   digit-interface uses (``CAP_PROP_ZOOM`` carries the packed R, G, B levels), each frame turned 90°.
 - ``video_device_for_serial``: the ``/dev/videoN`` of a sensor's serial number, through udev.
@@ -28,7 +29,7 @@ from typing import Any
 import numpy as np
 from wott_vision.camera import CameraError
 
-from .specs import DIGIT_LED_MAX, DIGIT_STREAMS, MINI_BORDER_FRACTION, MINI_SIZE
+from .specs import DIGIT_LED_MAX, DIGIT_STREAMS, MINI_BORDER_FRACTION, MINI_DECODE_SCALE, MINI_SIZE
 
 __all__ = ["IMAGE_SUFFIXES", "DigitCamera", "FolderReader", "MiniCamera", "decode_reduced", "rotate_digit",
            "shape_mini", "video_device_for_serial"]
@@ -162,7 +163,7 @@ class MiniCamera(_Device):
         if frame is None:
             return False, None
         if frame.ndim == 1 or (frame.ndim == 2 and frame.shape[0] == 1):  # the JPEG bytes
-            frame = decode_reduced(frame)
+            frame = decode_reduced(frame, MINI_DECODE_SCALE)
         return True, shape_mini(frame, self.size)
 
 

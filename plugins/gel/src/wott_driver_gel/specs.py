@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["DIGIT_LED_MAX", "DIGIT_STREAMS", "DIGIT_VIEW_MM", "MINI_BORDER_FRACTION", "MINI_NATIVE",
-           "MINI_SIZE", "MINI_VIEW_MM", "default_mm_per_px"]
+__all__ = ["DIGIT_LED_MAX", "DIGIT_STREAMS", "DIGIT_VIEW_MM", "MINI_BORDER_FRACTION", "MINI_DECODE_SCALE",
+           "MINI_NATIVE", "MINI_SIZE", "MINI_VIEW_MM", "default_mm_per_px"]
 
 MINI_NATIVE = (3280, 2464)
 """The Mini's native MJPEG frame (width, height), px."""
@@ -27,6 +27,10 @@ MINI_BORDER_FRACTION = 0.15
 """Cropped from each side of the native frame before resizing (gsrobotics ``crop_and_resize``)."""
 MINI_SIZE = (320, 240)
 """The shaped frame (width, height) gsrobotics works at by default, px."""
+MINI_DECODE_SCALE = 8
+"""The native JPEG decoded at 1/8 (410 x 308; cropped 287 x 216, then resized to ``MINI_SIZE``): libjpeg's
+DCT scaling costs 0.6x the 1/4 decode's CPU, and Taxim's Mini presses at 287 x 216 resized to 320 x 240
+score as at 320 x 240 (``bench gel``'s decode table: error against run time)."""
 MINI_VIEW_MM = 640 * 0.0295
 """Width of the shaped view, mm (Taxim's 0.0295 mm/px at 640 px)."""
 
