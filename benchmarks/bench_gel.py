@@ -106,6 +106,7 @@ def depth(ps: PressSet) -> tuple[list[list[str]], str]:
         for i in test:
             d = cal.depth(smooth(ps.presses[i], cal.sigma_px), ref, 8.0)
             centre[i], dent[i] = dent_depth(d, ps.centres_px[i], ps.radii_px[i], cal.scale)
+    change = np.array([np.abs(p.astype(np.float32) - ps.background).sum() for p in ps.presses])
     r = ps.radii_px * ps.mm_per_px
     ball = BALL_R - np.sqrt(BALL_R**2 - r**2)  # the cap the labels' contact circle implies
     err = dent / ball - 1
@@ -117,12 +118,16 @@ def depth(ps: PressSet) -> tuple[list[list[str]], str]:
                      f"{spearmanr(np.arange(a, b), dent[a:b])[0]:.2f}"])
         rows.append([f"Spearman, dent vs the labels' implied depth, presses {a}-{b - 1}",
                      f"{spearmanr(ball[a:b], dent[a:b])[0]:.2f}"])
+        rows.append([f"Spearman, the images' total colour change vs press order, presses {a}-{b - 1} (no "
+                     "model: the raw signal's own order)",
+                     f"{spearmanr(np.arange(a, b), change[a:b])[0]:.2f}"])
     note = ("Depth (leave half out: a table from the even presses measures the odd ones, and the other way "
             f"round; ball radius {BALL_R:g} mm). The ball's geometry fixes the dent inside the contact "
             "circle, R - sqrt(R² - r²) with r the label's radius; the depth at the centre also holds the "
             "gel sinking around the contact (an elastic solid: Hertz's indentation is twice the cap), so it "
             "is reported beside. The labels' radii are not monotone in press order within a series, hence "
-            "both Spearman coefficients.")
+            "both Spearman coefficients; nor is the images' own colour change (summed over the frame, no "
+            "model), so press order is not the presses' depth order in this set.")
     return rows, note
 
 
