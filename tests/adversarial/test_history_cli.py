@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sqlite3
 import subprocess
 import sys
@@ -122,3 +123,21 @@ def test_a_non_finite_number_never_becomes_record_json(bad):
     with pytest.raises(ValueError, match="JSON compliant"):
         encode({"contactForces": [{"x": 0.0, "y": bad, "z": 0.0}]})
     assert json.loads(encode({"x": 1e300})) == {"x": 1e300}  # large but finite is fine
+
+
+@pytest.mark.parametrize("suffix", ["-wal", "-shm", "-journal"])
+def test_a_fifo_beside_the_database_where_sqlite_opens_its_own_files_is_one_line(good, tmp_path, suffix):
+    """Issue 48: SQLite opens its write-ahead log, shared-memory index and rollback journal itself; a FIFO
+    named so beside the database blocked the open (a ``-journal`` FIFO for ever: no timeout reaches inside
+    SQLite). ``history`` and ``replay`` refuse it with one line naming the file, nothing opened."""
+    db = tmp_path / "h.db"
+    with sqlite3.connect(good) as src, sqlite3.connect(db) as dst:
+        src.backup(dst)
+    for side in tmp_path.glob("h.db-*"):  # what SQLite's backup left beside the copy
+        side.unlink()
+    fifo = tmp_path / f"h.db{suffix}"
+    os.mkfifo(fifo)
+    for args in (("history", "list"), ("replay", "--device", "d", "--port", "0", "--ws-port", "0")):
+        line = _one_error_line(_cli(*args, "--database", str(db)))
+        assert f"h.db{suffix}' is not a regular file" in line, line
+    assert fifo.exists() and sorted(p.name for p in tmp_path.iterdir()) == sorted(["h.db", fifo.name])

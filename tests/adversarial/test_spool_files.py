@@ -180,11 +180,13 @@ def test_a_damaged_spool_keeps_what_can_be_read_and_says_what_it_lost(
         assert "Traceback" not in got["log"], got["log"][-3000:]
 
 
-@pytest.mark.parametrize("target", ["hub.db.hub-id", "hub.db"])
+@pytest.mark.parametrize("target", ["hub.db.hub-id", "hub.db", "hub.db-wal", "hub.db-shm", "hub.db-journal"])
 def test_a_fifo_or_dev_zero_as_the_hub_id_file_or_database_is_one_line_not_a_hang(
         tmp_path, running_hub, target):
     """The same attack on the other files the hub reads: its id file beside the database, the database
-    file itself: before, the start blocked opening the FIFO (and ``/dev/zero`` would be read without end)."""
+    file itself, and the files SQLite opens itself beside it (its write-ahead log, shared-memory index,
+    rollback journal: ``db.check_sidecars``): before, the start blocked opening the FIFO (SIGTERM
+    ignored; for the sidecars inside SQLite's own open) and ``/dev/zero`` would be read without end."""
     for name, plant in (("fifo", S.fifo), ("dev-zero", lambda p: p.symlink_to("/dev/zero"))):
         folder = tmp_path / name
         folder.mkdir()
@@ -200,3 +202,5 @@ def test_a_fifo_or_dev_zero_as_the_hub_id_file_or_database_is_one_line_not_a_han
         print(f"{target} {name}: exit {rc} in {took:.1f} s: {log.strip().splitlines()[-1:]}")
         assert rc is not None and rc != 0, f"{name}: the hub did not end: {log[-2000:]}"
         assert "Traceback" not in log and "not a regular file" in log, log[-3000:]
+        named = (f"{target}'", f"{target}:", "'/dev/zero'")  # the file, or where its symlink leads
+        assert any(n in log for n in named), log[-3000:]

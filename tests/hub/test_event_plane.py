@@ -364,3 +364,37 @@ def test_what_history_has_not_committed_is_kept_beyond_the_ring_up_to_a_byte_cap
     assert len(st.ring) == 4 and st.ring_bytes == 4 * 50_000  # over the cap, never under ring_max
     hist.commit()
     assert len(st.ring) == 4 and st.ring_bytes == sum(len(r.data) for r in st.ring)
+
+
+def test_the_held_queue_of_committed_mode_is_bounded_in_bytes_dropping_the_oldest_with_a_count(caplog):
+    """Issue 48: on a full disk the writer drops what it cannot queue and the watermark stands still, so
+    "committed" mode held every record up to ``max_held`` (1,000,000 raw images: 250 GB). Beyond
+    ``held_max_bytes`` the oldest held are let go, counted (``held_health``) and said in the log; what is
+    committed afterwards is delivered, in order."""
+    plane = EventPlane(durability="committed", held_max_bytes=10_000)
+    hist = ListHistory(plane)
+    plane.history_sink = plane.history_source = hist
+    plane.add_stream("cam", record=True, start_after=0)
+    sub = plane.subscribe("cam", (KIND_EVENT, None))
+    image = "x" * 1_800  # 2,000 bytes a record with its objects (record_bytes)
+    with caplog.at_level("WARNING", logger="wott_hub.events.plane"):
+        for _ in range(100):
+            plane.publish("cam", KIND_EVENT, "image", 0, image)
+    st = plane.stream("cam")
+    assert len(st.held) == 5 and st.held_bytes == 10_000 and st.held[0].seq == 96
+    assert plane.held_health() == {"records": 5, "bytes": 10_000, "maxBytesPerThing": 10_000,
+                                   "notDelivered": 95}
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1, said  # once, not per record
+    assert "not delivered live" in said[0] and "cam" in said[0], said
+    big = "y" * 50_000  # one record over the bound on its own: the newest is always kept
+    plane.publish("cam", KIND_EVENT, "image", 0, big)
+    assert [r.seq for r in st.held] == [101] and st.held_dropped == 100
+    hist.commit()
+    assert st.held_bytes == 0 and not st.held
+
+    async def main():
+        got = await _drain(sub, 1)
+        assert [r.seq for r in got] == [101]
+
+    asyncio.run(main())

@@ -20,6 +20,11 @@ Durability (``durability``, the ``[history] durability`` setting):
   subscriber ever saw is in history, and a record the database refused is never
   delivered. The cost is the batch interval plus a commit added to every
   record's latency. Things that are not recorded are delivered at once in both.
+  The held queue is bounded per Thing in records (``max_held``) and in bytes
+  (``held_max_bytes``, the writer's queue budget: a record held beyond what the
+  writer can hold is one it gave up on, or soon will): beyond either the oldest
+  held records are not delivered live (``held_dropped``, in health and the log);
+  history still has the ones it commits, for a resume.
 
 Resume (SSE ``Last-Event-ID``): records after the client's last id are served
 from the in-memory ring of recent records when they are still there, else from
@@ -43,7 +48,7 @@ from typing import Protocol
 
 from wott_hub.errors import HistoryError
 
-from .record import Record, SkinArrays
+from .record import Record, SkinArrays, record_bytes
 from .subscriber import Interest, Subscriber
 
 __all__ = ["DURABILITY", "RING_RECORDED", "RING_UNRECORDED", "EventPlane", "HistorySink", "HistorySource",
@@ -108,6 +113,8 @@ class Stream:
     ring_max: int = RING_UNRECORDED  # the plane's ring size for this Thing (it trims down to it)
     ring_bytes: int = 0  # the ring's records' data, in characters (its hard cap in bytes)
     held: deque[Record] = field(default_factory=deque)  # durability "committed": not yet delivered
+    held_bytes: int = 0  # the held records' ``record_bytes``
+    held_dropped: int = 0  # held records let go past the bounds: never delivered live
     subs: dict[Interest, list[Subscriber]] = field(default_factory=dict)
     taps: list[Tap] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=lambda: defaultdict(int))
@@ -122,17 +129,26 @@ class EventPlane:
     commit_wait_s = 10.0  # how long a resume waits for history to commit its backlog
 
     max_held = 1_000_000  # per Thing, "committed" mode: beyond, the oldest held are not delivered live
+    held_max_bytes = 256_000_000
+    """Per Thing, "committed" mode: the held records' bytes (``record_bytes``) at most; beyond, the oldest
+    are not delivered live. The hub sets the writer's queue budget (``history_queue_mb``): on a full disk
+    the writer drops what it cannot queue but the watermark does not move, so the held queue kept every
+    record up to ``max_held`` (a raw camera's: +7.5 MB/s, 250 GB at the cap)."""
+    held_log_every_s = 10.0  # at most one WARNING this often while held records are let go
     ring_hold_bytes = 32_000_000
     """Per Thing, what the ring keeps beyond ``ring_max`` while history has not committed it, at most
     (and at most 16 x ``ring_max`` records): a raw camera's records on a full disk (never committed)
     kept 65,536 images, ~16 GB (issue 48, item 4)."""
 
     def __init__(self, *, ring_size: int | None = None, max_pending: int = 100_000,
-                 durability: str = "fast") -> None:
+                 durability: str = "fast", held_max_bytes: int | None = None) -> None:
         """``ring_size``: records per Thing kept in memory; None: ``RING_RECORDED`` for a recorded
-        Thing, ``RING_UNRECORDED`` for one that is not."""
+        Thing, ``RING_UNRECORDED`` for one that is not. ``held_max_bytes``: see the attribute."""
         self.set_durability(durability)
-        self.held_overflow = 0
+        if held_max_bytes is not None:
+            self.held_max_bytes = held_max_bytes
+        self.held_overflow = 0  # held records let go, all Things
+        self._held_logged = (-1e9, 0)  # time.monotonic() and held_overflow of the last WARNING
         self.ring_size = ring_size
         self.max_pending = max_pending
         # set by the hub once the history database is open
@@ -224,13 +240,41 @@ class EventPlane:
             self.history_sink.submit(rec)
             if self.hold:  # delivered by on_committed once the writer has committed it
                 st.held.append(rec)
-                if len(st.held) > self.max_held:
-                    st.held.popleft()
-                    self.held_overflow += 1
+                st.held_bytes += record_bytes(rec)
+                if len(st.held) > self.max_held or st.held_bytes > self.held_max_bytes:
+                    self._shed(st)
                 return
         elif not st.record:
             st.committed = rec.seq
         self._deliver(st, rec)
+
+    def _shed(self, st: Stream) -> None:
+        """The oldest held records let go until ``st`` is within both bounds (the newest is always kept):
+        counted, and said at most every ``held_log_every_s``."""
+        held = st.held
+        n = 0
+        while len(held) > 1 and (len(held) > self.max_held or st.held_bytes > self.held_max_bytes):
+            st.held_bytes -= record_bytes(held.popleft())
+            n += 1
+        st.held_dropped += n
+        self.held_overflow += n
+        now = time.monotonic()
+        at, before = self._held_logged
+        if now - at >= self.held_log_every_s:
+            self._held_logged = (now, self.held_overflow)
+            log.warning("history has not committed %s's records: %d held records over the bound "
+                        "(%d records, %.1f MB a Thing; %.1f MB held) were not delivered live (%d in all); "
+                        "history keeps the ones it commits", st.thing, self.held_overflow - before,
+                        self.max_held, self.held_max_bytes / 1e6, st.held_bytes / 1e6, self.held_overflow)
+
+    def held_health(self) -> dict[str, int]:
+        """"committed" mode: what waits for history to commit it, and what was let go past the bounds
+        (``notDelivered``): the hub's ``health.history.held``."""
+        streams = self.streams.values()
+        return {"records": sum(len(st.held) for st in streams),
+                "bytes": sum(st.held_bytes for st in streams),
+                "maxBytesPerThing": self.held_max_bytes,
+                "notDelivered": self.held_overflow}
 
     @staticmethod
     def _deliver(st: Stream, rec: Record) -> None:
@@ -265,6 +309,7 @@ class EventPlane:
                 held = st.held
                 while held and held[0].seq <= seq:
                     rec = held.popleft()
+                    st.held_bytes -= record_bytes(rec)
                     if not (failed and rec.seq in failed):
                         self._deliver(st, rec)
             if failed:

@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["KIND_EVENT", "KIND_NAMES", "KIND_PROPERTY", "Record", "SkinArrays", "encode"]
+__all__ = ["KIND_EVENT", "KIND_NAMES", "KIND_PROPERTY", "OBJECT_BYTES", "Record", "SkinArrays", "encode",
+           "record_bytes"]
 
 KIND_EVENT = 0
 KIND_PROPERTY = 1
@@ -115,3 +116,17 @@ def _revive(thing: str, seq: int, kind: int, name: str, t_ns: int, data: str,
             trace: dict[str, int] | None, skin: tuple[bytes, bytes] | None) -> Record:
     arrays = None if skin is None else SkinArrays.from_wire(skin)
     return Record(thing, seq, kind, name, t_ns, data, trace, arrays)
+
+
+OBJECT_BYTES = 200
+"""What a record held in a queue costs beyond its payload: the Record and its text objects, the slot."""
+
+
+def record_bytes(rec: Record) -> int:
+    """The memory a queued record holds, estimated (the same every time it is asked): its text, a skin
+    packet's arrays, ``OBJECT_BYTES``. What the writer's queue and the plane's held queue count."""
+    n = len(rec.data) + OBJECT_BYTES
+    skin = rec.skin
+    if skin is not None:
+        n += skin.ids.nbytes + skin.intensity.nbytes
+    return n

@@ -16,6 +16,7 @@ message names the database: one line on the CLI, health "degraded" in a hub.
 from __future__ import annotations
 
 import logging
+import os
 from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -199,10 +200,30 @@ def _sqlite_file(engine: Engine) -> Path | None:
     return Path(url.removeprefix("sqlite:///"))
 
 
+SIDECARS = {"-wal": "write-ahead log", "-shm": "shared-memory index", "-journal": "rollback journal"}
+"""The files SQLite opens itself beside a database ``<db><suffix>``, and what each is."""
+
+
+def check_sidecars(path: Path) -> None:
+    """Each of SQLite's own files beside ``path`` is a regular file or absent: SQLite opens them itself,
+    so a FIFO there blocked its open for ever (SIGTERM ignored) and ``/dev/zero`` would be mapped or read
+    without end (issue 48). A symlink to a regular file is followed as SQLite does; a dangling one is
+    refused (SQLite would create its target wherever it points)."""
+    for suffix, what in SIDECARS.items():
+        side = path.with_name(path.name + suffix)
+        if os.path.lexists(side) and not side.is_file():
+            raise HistoryError(f"{str(side)!r} is not a regular file: it would be SQLite's {what} of the "
+                               "history database beside it; remove it")
+
+
 def _check_sqlite_file(engine: Engine, *, allow_empty: bool) -> None:
-    """An existing SQLite file must start with SQLite's header (else it is not a database at all)."""
+    """An existing SQLite file must start with SQLite's header (else it is not a database at all); the
+    files SQLite opens beside it must be regular files (``check_sidecars``), whether it exists or not."""
     path = _sqlite_file(engine)
-    if path is None or not path.exists():
+    if path is None:
+        return
+    check_sidecars(path)
+    if not path.exists():
         return
     if not path.is_file():  # a FIFO would block the open below and SQLite's; a device never ends
         raise HistoryError(f"{str(path)!r} is not a regular file: not a wott-hub history database")

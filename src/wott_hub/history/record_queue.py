@@ -25,25 +25,14 @@ import threading
 import time
 from collections import deque
 
-from wott_hub.events.record import Record
+from wott_hub.events.record import OBJECT_BYTES as _OBJECT_BYTES
+from wott_hub.events.record import Record, record_bytes
 
 __all__ = ["QUEUE_BYTES", "RecordQueue", "record_bytes"]
 
 QUEUE_BYTES = 256_000_000
 """The default byte budget of the queue (``history_queue_mb``): at 7.5 MB/s of raw images a
 34 s outage before the spool takes the records, ~5 minutes of a 32-device hub's taxel packets."""
-
-_OBJECT_BYTES = 200
-"""What a queued record costs beyond its payload: the Record and its text objects, the deque's slot."""
-
-
-def record_bytes(rec: Record) -> int:
-    """The memory a queued record holds, estimated (the same every time it is asked)."""
-    n = len(rec.data) + _OBJECT_BYTES
-    skin = rec.skin
-    if skin is not None:
-        n += skin.ids.nbytes + skin.intensity.nbytes
-    return n
 
 
 class RecordQueue:

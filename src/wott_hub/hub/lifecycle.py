@@ -66,7 +66,8 @@ class Hub:
                  extra_handlers: Sequence[tuple[Any, ...]] = ()) -> None:
         self.config = cfg = config or HubConfig()
         self._plane = EventPlane(ring_size=cfg.ring_size, max_pending=cfg.max_pending,
-                                durability=cfg.history_durability)
+                                durability=cfg.history_durability,
+                                held_max_bytes=int(cfg.history_queue_mb * 1e6))  # see EventPlane
         # the rules across tables (an open non-loopback hub, [foxglove] off loopback, two endpoints on one
         # port): the same list `wott-hub config check` prints (config_rules.py), refused as one ConfigError
         if problems := startup_problems(cfg):

@@ -154,6 +154,8 @@ class HubHistory:
         if w is not None and engine is not None:  # both set by open()
             out.update(w.health(), database=describe(engine.url))
             _spool_damage(out, w)
+            if self.plane.hold:  # "committed": what waits for its commit, what was let go past the bound
+                out["held"] = self.plane.held_health()
         out["exports"] = self.exports.health()
         return out
 
