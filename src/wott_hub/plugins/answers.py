@@ -4,8 +4,8 @@ A plugin's ``wott_hub_demo_devices``, ``wott_hub_claim_td`` and ``wott_hub_usb_d
 anything; what is not what the hook promises (a non-list, a ``DeviceConfig`` of a family it does
 not provide, a ``UsbMatch`` that can never match) is recorded against that plugin and left out,
 and the other plugins' answers stand. Called through ``Registry``'s methods of the same names,
-with the registry's own one-plugin-at-a-time calls (``_call_each``) and error record
-(``_record_error``); split from ``registry.py`` to keep each module to one job.
+with the registry's one-plugin-at-a-time calls (``call_each``), error record (``record_error``) and
+plugin order (``plugin_names``); split from ``registry.py`` to keep each module to one job.
 """
 
 from __future__ import annotations
@@ -19,12 +19,11 @@ from .model import DeviceConfig, FamilyInfo, UsbMatch
 class Registry(Protocol):
     """What of ``registry.Registry`` these checks use (a protocol: no import of it, no cycle)."""
 
-    @property
-    def _records(self) -> Mapping[str, Any]: ...
+    def plugin_names(self) -> list[str]: ...
 
-    def _call_each(self, hook: str, copy_args: bool = False, **kwargs: Any) -> Iterator[tuple[str, Any]]: ...
+    def call_each(self, hook: str, copy_args: bool = False, **kwargs: Any) -> Iterator[tuple[str, Any]]: ...
 
-    def _record_error(self, plugin: str, hook: str, message: str) -> None: ...
+    def record_error(self, plugin: str, hook: str, message: str) -> None: ...
 
     def families(self) -> dict[str, FamilyInfo]: ...
 
@@ -37,18 +36,18 @@ def demo_devices(reg: Registry) -> list[DeviceConfig]:
     families = reg.families()
     out: list[DeviceConfig] = []
     ids: set[str] = set()
-    for name, result in reg._call_each(hook):
+    for name, result in reg.call_each(hook):
         if not isinstance(result, list | tuple):
-            reg._record_error(name, hook, f"returned {type(result).__name__}, not a list of DeviceConfig")
+            reg.record_error(name, hook, f"returned {type(result).__name__}, not a list of DeviceConfig")
             continue
         for cfg in result:
             if not isinstance(cfg, DeviceConfig):
-                reg._record_error(name, hook, f"returned a {type(cfg).__name__}, not a DeviceConfig")
+                reg.record_error(name, hook, f"returned a {type(cfg).__name__}, not a DeviceConfig")
             elif cfg.family not in families or families[cfg.family].plugin != name:
-                reg._record_error(name, hook, f"demo device {cfg.id!r} names family {cfg.family!r}, "
+                reg.record_error(name, hook, f"demo device {cfg.id!r} names family {cfg.family!r}, "
                                               "which this plugin does not provide")
             elif cfg.id in ids:
-                reg._record_error(name, hook, f"demo device id {cfg.id!r} is already taken")
+                reg.record_error(name, hook, f"demo device id {cfg.id!r} is already taken")
             else:
                 ids.add(cfg.id)
                 out.append(cfg)
@@ -59,13 +58,13 @@ def claim(reg: Registry, td: Mapping[str, Any]) -> DeviceConfig | None:
     """The device config of the first plugin that adopts a foreign TD (``wott_hub_claim_td``), or None."""
     hook = "wott_hub_claim_td"
     families = reg.families()
-    for name, result in reg._call_each(hook, copy_args=True, td=dict(td)):
+    for name, result in reg.call_each(hook, copy_args=True, td=dict(td)):
         if result is None:
             continue
         if not isinstance(result, DeviceConfig):
-            reg._record_error(name, hook, f"returned {type(result).__name__}, not a DeviceConfig")
+            reg.record_error(name, hook, f"returned {type(result).__name__}, not a DeviceConfig")
         elif result.family not in families:
-            reg._record_error(name, hook, f"claimed a device for unknown family {result.family!r}")
+            reg.record_error(name, hook, f"claimed a device for unknown family {result.family!r}")
         else:
             return result
     return None
@@ -77,13 +76,13 @@ def usb_matches(reg: Registry) -> list[UsbMatch]:
     one kept once."""
     hook = "wott_hub_usb_devices"
     answers: dict[str, list[Any]] = {}
-    for name, result in reg._call_each(hook):
+    for name, result in reg.call_each(hook):
         answers.setdefault(name, []).append(result)
     out: list[UsbMatch] = []
-    for name in [n for n in reg._records if n in answers]:
+    for name in [n for n in reg.plugin_names() if n in answers]:
         for result in answers[name]:
             if not isinstance(result, list | tuple):
-                reg._record_error(name, hook, f"returned {type(result).__name__}, not a list of UsbMatch")
+                reg.record_error(name, hook, f"returned {type(result).__name__}, not a list of UsbMatch")
                 continue
             _accept_usb(reg, name, result, out)
     return out
@@ -93,8 +92,8 @@ def _accept_usb(reg: Registry, name: str, result: list[Any] | tuple[Any, ...], o
     hook = "wott_hub_usb_devices"
     for match in result:
         if not isinstance(match, UsbMatch):
-            reg._record_error(name, hook, f"returned a {type(match).__name__}, not a UsbMatch")
+            reg.record_error(name, hook, f"returned a {type(match).__name__}, not a UsbMatch")
         elif (problem := match.problem()) is not None:
-            reg._record_error(name, hook, f"USB match for family {match.family!r}: {problem}")
+            reg.record_error(name, hook, f"USB match for family {match.family!r}: {problem}")
         elif match not in out:
             out.append(match)

@@ -124,8 +124,12 @@ class Registry:
             self._families = None
             return self._info(rec)
 
-    # -- calling hooks, one plugin at a time -----------------------------------
-    def _record_error(self, plugin: str, hook: str, message: str, fault: Fault | None = None) -> None:
+    # -- calling hooks, one plugin at a time (``answers.py`` checks some hooks' answers with these) ------
+    def plugin_names(self) -> list[str]:
+        """The plugins' names, in the order they were registered."""
+        return list(self._records)
+
+    def record_error(self, plugin: str, hook: str, message: str, fault: Fault | None = None) -> None:
         """Keep each distinct message once (a hook failing on every call must not grow memory), and log
         it when it is new (``fault``: with the traceback)."""
         with self._lock:
@@ -145,7 +149,7 @@ class Registry:
             caller = self._callers[key] = self.pm.subset_hook_caller(hook, remove_plugins=others)
         return caller
 
-    def _call_each(self, hook: str, copy_args: bool = False, **kwargs: Any) -> Iterator[tuple[str, Any]]:
+    def call_each(self, hook: str, copy_args: bool = False, **kwargs: Any) -> Iterator[tuple[str, Any]]:
         """Yield (plugin name, what its implementation returned), skipping and recording failures.
 
         ``copy_args`` gives each plugin its own deep copy of the arguments, so one
@@ -162,7 +166,7 @@ class Registry:
             args = copy.deepcopy(kwargs) if copy_args else kwargs
             out = attempt(f"{hook}()", self._caller(hook, impl.plugin, name), **args)
             if out.fault is not None:
-                self._record_error(name, hook, f"raised {out.fault.detail}", out.fault)
+                self.record_error(name, hook, f"raised {out.fault.detail}", out.fault)
                 continue
             if firstresult:
                 yield name, out.value
@@ -188,7 +192,7 @@ class Registry:
             rec.families = []
             rec.errors.pop(hook, None)  # asked afresh: old answers no longer apply
         answers: dict[str, list[Any]] = {}
-        for name, result in self._call_each(hook):
+        for name, result in self.call_each(hook):
             answers.setdefault(name, []).append(result)
         # On a name clash the plugin registered first keeps the family (built-ins, then entry
         # points by name), whatever order pluggy calls them in: stable across runs and installs.
@@ -203,11 +207,11 @@ class Registry:
                          validator_cls: type[Validator], schema_error: type[SchemaError]) -> None:
         hook = "wott_hub_families"
         if not isinstance(result, list | tuple):
-            self._record_error(name, hook, f"returned {type(result).__name__}, not a list of FamilyInfo")
+            self.record_error(name, hook, f"returned {type(result).__name__}, not a list of FamilyInfo")
             return
         for fam in result:
             if not isinstance(fam, FamilyInfo):
-                self._record_error(name, hook, f"returned a {type(fam).__name__}, not a FamilyInfo")
+                self.record_error(name, hook, f"returned a {type(fam).__name__}, not a FamilyInfo")
                 continue
             model = fam.schema if isinstance(fam.schema, type) else None
             schema = fam.schema
@@ -215,16 +219,16 @@ class Registry:
                 try:
                     schema = settings_schema(schema)
                 except Exception as e:
-                    self._record_error(name, hook, f"family {fam.name!r}: invalid settings model: {e}")
+                    self.record_error(name, hook, f"family {fam.name!r}: invalid settings model: {e}")
                     continue
                 fam = replace(fam, schema=schema)
             try:
                 validator_cls.check_schema(schema)
             except schema_error as e:
-                self._record_error(name, hook, f"family {fam.name!r}: invalid settings schema: {e.message}")
+                self.record_error(name, hook, f"family {fam.name!r}: invalid settings schema: {e.message}")
                 continue
             if fam.name in found:
-                self._record_error(name, hook, f"family {fam.name!r} is already provided by plugin "
+                self.record_error(name, hook, f"family {fam.name!r} is already provided by plugin "
                                                f"{found[fam.name].plugin!r}")
                 continue
             found[fam.name] = replace(fam, plugin=name)
@@ -281,12 +285,12 @@ class Registry:
             if isinstance(out.fault.error, DriverError):  # the device's problem, in the plugin's words
                 raise out.fault.error
             msg = f"raised {out.fault.detail}"
-            self._record_error(plugin, hook, msg, out.fault)
+            self.record_error(plugin, hook, msg, out.fault)
             raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} {msg}") from out.fault.error
         driver = out.value
         if not isinstance(driver, Driver):
             msg = f"returned {type(driver).__name__} for device {cfg.id!r}, not a Driver"
-            self._record_error(plugin, hook, msg)
+            self.record_error(plugin, hook, msg)
             raise DriverError(f"device {cfg.id!r}: plugin {plugin!r} {msg}")
         return driver
 
@@ -308,7 +312,7 @@ class Registry:
             if isinstance(res.fault.error, DriverError):
                 raise res.fault.error
             msg = f"raised {res.fault.detail}"
-            self._record_error(plugin, hook, msg, res.fault)
+            self.record_error(plugin, hook, msg, res.fault)
             raise DriverError(f"calibrate {family!r}: plugin {plugin!r} {msg}") from res.fault.error
         if not isinstance(res.value, str):
             raise DriverError(f"calibrate {family!r}: plugin {plugin!r} returned {type(res.value).__name__}, "
