@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rest import RestReference, change, smooth
+from .rest import RestReference, blur, magnitude, smooth
 
-__all__ = ["ContactParams", "PixelContact", "drift_free", "find_contacts", "threshold"]
+__all__ = ["ContactParams", "PixelContact", "drift", "drift_free", "find_contacts", "threshold", "upsample"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,43 +61,86 @@ def threshold(ref: RestReference, p: ContactParams) -> float:
 
 
 def drift_free(d: np.ndarray, thr: float, sigma_px: float, iters: int, down: int = 4) -> np.ndarray:
-    """``d`` (H, W[, C] signed change) less its low-frequency part, fitted where there is no contact.
+    """``d`` (H, W[, C] signed change) less its low-frequency part (``drift``)."""
+    low = drift(d, thr, sigma_px, iters, down)
+    h, w = d.shape[:2]
+    out: np.ndarray = np.subtract(d, upsample(low, (h, w), (0, h, 0, w)).reshape(d.shape), dtype=np.float32)
+    return out
 
-    The low part is a normalized convolution (a Gaussian of ``sigma_px`` over the pixels counted as
-    background, divided by the same over their weights), at 1/``down`` scale (it is smooth, and a
-    quarter scale costs a sixteenth); after each pass the pixels still changed by ``thr`` or more, grown
-    by 5 small pixels, are left out of the next, so the contact's own change is not subtracted from it
-    (a plain high-pass would: the contact would shrink and its rim break)."""
+
+def drift(d: np.ndarray, thr: float, sigma_px: float, iters: int, down: int = 4) -> np.ndarray:
+    """The low-frequency part of ``d`` (H, W[, C] signed change) fitted where there is no contact, at
+    1/``down`` scale (H/down, W/down, C).
+
+    A normalized convolution (a Gaussian of ``sigma_px`` over the pixels counted as background, divided
+    by the same over their weights), at 1/``down`` scale (it is smooth, and a quarter scale costs a
+    sixteenth); after each pass the pixels still changed by ``thr`` or more, grown by 5 small pixels,
+    are left out of the next, so the contact's own change is not subtracted from it (a plain high-pass
+    would: the contact would shrink and its rim break). A pass that leaves out the same pixels as the
+    one before would give the same low part again: the passes stop there. The weighted change and its
+    weights are blurred together (one Gaussian over C + 1 channels)."""
     import cv2
 
     h, w = d.shape[:2]
-    small = np.asarray(cv2.resize(d, (max(w // down, 1), max(h // down, 1)), interpolation=cv2.INTER_AREA))
+    small = np.asarray(cv2.resize(d, (max(w // down, 1), max(h // down, 1)), interpolation=cv2.INTER_AREA),
+                       dtype=np.float32)
     if small.ndim == 2:
         small = small[..., None]
+    c = small.shape[2]
     s = sigma_px / down
-    wgt = np.ones(small.shape[:2], np.float32)
-    low = np.zeros_like(small)
+    base = np.empty(small.shape[:2] + (c + 1,), np.float32)  # the change and a weight of 1, per pixel
+    base[..., :c] = small
+    base[..., c] = 1.0
+    both = base  # the weighted change and the weights: 0 where left out
     grow = np.ones((5, 5), np.uint8)
+    low: np.ndarray = np.zeros_like(small)
+    left_out: np.ndarray | None = None
     for _ in range(iters):
-        num = np.asarray(cv2.GaussianBlur(small * wgt[..., None], (0, 0), s)).reshape(small.shape)
-        den = np.asarray(cv2.GaussianBlur(wgt, (0, 0), s))
-        low = num / np.maximum(den, 1e-3)[..., None]
-        r = small - low
-        still = np.sqrt((r * r).sum(axis=-1)) >= thr
-        wgt = 1.0 - cv2.dilate(still.astype(np.uint8), grow).astype(np.float32)
-    up = np.asarray(cv2.resize(low, (w, h), interpolation=cv2.INTER_LINEAR)).reshape(h, w, -1)
-    out: np.ndarray = (d - up.reshape(d.shape)).astype(np.float32)
+        blurred = blur(both, s).reshape(both.shape)
+        np.divide(blurred, np.maximum(blurred[..., c:], 1e-3), out=blurred)
+        low = np.ascontiguousarray(blurred[..., :c])
+        still = (magnitude(np.subtract(small, low)) >= thr).view(np.uint8)
+        out_now = np.asarray(cv2.dilate(still, grow))
+        if left_out is not None and np.array_equal(out_now, left_out):
+            break
+        left_out = out_now
+        both = np.zeros_like(base)
+        cv2.copyTo(base, (out_now == 0).view(np.uint8), both)
+    return low
+
+
+def upsample(low: np.ndarray, shape: tuple[int, int], box: tuple[int, int, int, int]) -> np.ndarray:
+    """Rows ``y0:y1``, columns ``x0:x1`` (``box``) of ``low`` (h, w, C) resized to ``shape`` (bilinear),
+    (y1 - y0, x1 - x0, C). When ``shape`` is a whole multiple of ``low``'s, only the part of ``low`` under
+    the box (and one small pixel around it) is resized: the same values, for the box's cost."""
+    import cv2
+
+    h, w = shape
+    hs, ws, c = low.shape
+    y0, y1, x0, x1 = box
+    if h % hs or w % ws or h // hs != w // ws:
+        part, a0, b0 = low, 0, 0
+        size = (w, h)
+    else:
+        k = h // hs
+        a0, a1 = max(y0 // k - 1, 0), min(-(-y1 // k) + 1, hs)
+        b0, b1 = max(x0 // k - 1, 0), min(-(-x1 // k) + 1, ws)
+        part, size = low[a0:a1, b0:b1], ((b1 - b0) * k, (a1 - a0) * k)
+        a0, b0 = a0 * k, b0 * k
+    up = np.asarray(cv2.resize(np.ascontiguousarray(part if c > 1 else part[..., 0]), size,
+                               interpolation=cv2.INTER_LINEAR)).reshape(size[1], size[0], c)
+    out: np.ndarray = up[y0 - a0:y1 - a0, x0 - b0:x1 - b0]
     return out
 
 
 def join(labels: np.ndarray, n: int, stats: np.ndarray, k: float) -> np.ndarray:
-    """Labels with the fragments of one contact under one label: components ``i``, ``j`` whose gap (the
-    least distance between their pixels) is under ``k`` times the larger one's radius ``sqrt(area/pi)``
-    (transitively). Few components, so one distance transform each."""
+    """The label (n,) each of the ``n`` labels goes under, the fragments of one contact under one:
+    components ``i``, ``j`` whose gap (the least distance between their pixels) is under ``k`` times the
+    larger one's radius ``sqrt(area/pi)`` (transitively). Few components, so one distance transform each."""
     import cv2
 
     if n <= 2 or k <= 0:
-        return labels
+        return np.arange(n)
     radius = np.sqrt(stats[:, cv2.CC_STAT_AREA] / np.pi)
     parent = list(range(n))
 
@@ -113,45 +156,68 @@ def join(labels: np.ndarray, n: int, stats: np.ndarray, k: float) -> np.ndarray:
             gap = float(dist[labels == j].min())
             if gap < k * max(radius[i], radius[j]):
                 parent[root(j)] = root(i)
-    lut = np.array([root(i) for i in range(n)], dtype=labels.dtype)
-    joined: np.ndarray = lut[labels]
-    return joined
+    lut: np.ndarray = np.array([root(i) for i in range(n)])
+    return lut
 
 
 def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, smoothed: bool = False,
                   ignore: np.ndarray | None = None) -> tuple[list[PixelContact], np.ndarray]:
     """The contacts of ``image`` against ``ref`` (see module doc), and the change magnitude (H, W).
     ``smoothed``: ``image`` is already ``rest.smooth``ed by ``p.sigma_px``; ``ignore`` (H, W) bool: pixels
-    whose change is not contact (a marker gel's dots, ``markers.MarkerField.dots``)."""
+    whose change is not contact (a marker gel's dots, ``markers.MarkerField.dots``).
+
+    The frame-wide work is one subtraction and one norm per step; the segmentation (opening aside) and
+    each component's centre and radius are computed inside bounding boxes: the changed pixels' box for
+    the connected components, each component's own box for its reductions (a contact covers a small
+    part of the view)."""
     import cv2
 
     frame = image if smoothed else smooth(image, p.sigma_px)
-    mag = change(frame, ref.image)
+    d = cv2.subtract(frame, ref.image) if frame.dtype == ref.image.dtype else frame - ref.image
+    mag = magnitude(d)
     if ignore is not None:
         mag[ignore] = 0.0
     thr = threshold(ref, p)
-    mask: np.ndarray = (mag > thr).astype(np.uint8)
-    if not mask.any():  # the gel at rest, most frames: nothing to segment
+    if not float(mag.max()) > thr:  # the gel at rest, most frames: nothing to segment
         return [], mag
     if p.drift_sigma_px > 0:
-        d = drift_free(frame - ref.image, thr, p.drift_sigma_px, p.drift_iters)
-        mag = np.sqrt((d * d).sum(axis=-1)) if d.ndim == 3 else np.abs(d)
+        low = drift(d, thr, p.drift_sigma_px, p.drift_iters)
+        # |d - low| <= |d| + max |low| (the resized low part is a convex mix of its samples): only pixels
+        # changed by more than thr - max |low| can be contact, so the drift is taken out in their box
+        x0, y0, bw, bh = cv2.boundingRect((mag > thr - float(magnitude(low).max())).view(np.uint8))
+        if bw == 0:
+            return [], mag
+        y1, x1 = y0 + bh, x0 + bw
+        up = upsample(low, mag.shape, (y0, y1, x0, x1)).reshape(d[y0:y1, x0:x1].shape)
+        mag[y0:y1, x0:x1] = magnitude(np.subtract(d[y0:y1, x0:x1], up))
         if ignore is not None:
             mag[ignore] = 0.0
-        mask = (mag > thr).astype(np.uint8)
-        if not mask.any():
+        if not float(mag.max()) > thr:
             return [], mag
+    mask: np.ndarray = (mag > thr).view(np.uint8)  # 1 where changed
     if p.open_px > 1:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((p.open_px, p.open_px), np.uint8))
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    labels = join(labels, n, stats, p.join_k)
+    x0, y0, bw, bh = cv2.boundingRect(mask)
+    if bw == 0:
+        return [], mag
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask[y0:y0 + bh, x0:x0 + bw], connectivity=8)
+    lut = join(labels, n, stats, p.join_k)
+    if not np.array_equal(lut, np.arange(n)):
+        labels = lut.astype(labels.dtype)[labels]
+    box = mag[y0:y0 + bh, x0:x0 + bw]
     out: list[PixelContact] = []
-    for i in np.unique(labels[labels > 0]):
-        ys, xs = np.nonzero(labels == i)
+    for i in np.unique(lut[1:]):
+        parts = np.flatnonzero(lut == i)
+        cx0 = int(stats[parts, cv2.CC_STAT_LEFT].min())
+        cy0 = int(stats[parts, cv2.CC_STAT_TOP].min())
+        cx1 = int((stats[parts, cv2.CC_STAT_LEFT] + stats[parts, cv2.CC_STAT_WIDTH]).max())
+        cy1 = int((stats[parts, cv2.CC_STAT_TOP] + stats[parts, cv2.CC_STAT_HEIGHT]).max())
+        ys, xs = np.nonzero(labels[cy0:cy1, cx0:cx1] == i)
         area = int(ys.size)
         if area < p.min_area_px:
             continue
-        wts = mag[ys, xs].astype(np.float64)
+        wts = box[cy0:cy1, cx0:cx1][ys, xs].astype(np.float64)
+        xs, ys = xs + (x0 + cx0), ys + (y0 + cy0)
         peak = float(wts.max())
         above = wts - thr  # a pixel crossing the threshold enters with weight 0: no jump
         cx = float(xs @ above) / float(above.sum())
