@@ -191,6 +191,8 @@ def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, sm
     thr = threshold(ref, p)
     if not float(mag.max()) > thr:  # the gel at rest, most frames: nothing to segment
         return [], mag
+    h, w = mag.shape
+    y0, y1, x0, x1 = 0, h, 0, w  # the box outside which nothing passes the threshold
     if p.drift_sigma_px > 0:
         low = drift(d, thr, p.drift_sigma_px, p.drift_iters)
         # |d - low| <= |d| + max |low| (the resized low part is a convex mix of its samples): only pixels
@@ -199,19 +201,22 @@ def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, sm
         if bw == 0:
             return [], mag
         y1, x1 = y0 + bh, x0 + bw
-        up = upsample(low, mag.shape, (y0, y1, x0, x1)).reshape(d[y0:y1, x0:x1].shape)
+        up = upsample(low, (h, w), (y0, y1, x0, x1)).reshape(d[y0:y1, x0:x1].shape)
         mag[y0:y1, x0:x1] = magnitude(np.subtract(d[y0:y1, x0:x1], up))
         if ignore is not None:
             mag[ignore] = 0.0
-        if not float(mag.max()) > thr:
-            return [], mag
-    mask: np.ndarray = (mag > thr).view(np.uint8)  # 1 where changed
+    # the mask in that box and a margin of the opening's size (zeros: the full frame's opening near the box)
+    m = p.open_px if p.open_px > 1 else 0
+    y0, y1, x0, x1 = max(y0 - m, 0), min(y1 + m, h), max(x0 - m, 0), min(x1 + m, w)
+    mask: np.ndarray = (mag[y0:y1, x0:x1] > thr).view(np.uint8)  # 1 where changed
     if p.open_px > 1:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((p.open_px, p.open_px), np.uint8))
-    x0, y0, bw, bh = cv2.boundingRect(mask)
+    bx, by, bw, bh = cv2.boundingRect(mask)
     if bw == 0:
         return [], mag
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask[y0:y0 + bh, x0:x0 + bw], connectivity=8)
+    mask = mask[by:by + bh, bx:bx + bw]
+    y0, x0 = y0 + by, x0 + bx
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     lut = join(labels, n, stats, p.join_k)
     if not np.array_equal(lut, np.arange(n)):
         labels = lut.astype(labels.dtype)[labels]
