@@ -24,6 +24,7 @@ Positions are pixel (x = column, y = row) here; the driver turns them into mm.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -88,25 +89,39 @@ def drift(d: np.ndarray, thr: float, sigma_px: float, iters: int, down: int = 4)
         small = small[..., None]
     c = small.shape[2]
     s = sigma_px / down
-    base = np.empty(small.shape[:2] + (c + 1,), np.float32)  # the change and a weight of 1, per pixel
-    base[..., :c] = small
-    base[..., c] = 1.0
-    both = base  # the weighted change and the weights: 0 where left out
+    base: np.ndarray | None = None  # the change and a weight of 1 per pixel (C + 1 channels)
+    both = small  # what is blurred: the weighted change (and the weights, after the first pass)
     grow = np.ones((5, 5), np.uint8)
     low: np.ndarray = np.zeros_like(small)
     left_out: np.ndarray | None = None
-    for _ in range(iters):
+    for k in range(iters):
         planes = cv2.split(blur(both, s))  # planes: numpy divides them at full speed, not pixel by pixel
-        den = np.maximum(planes[c], 1e-3)
+        # the first pass weighs every pixel 1: its weights' blur depends on the shape only
+        den = np.maximum(planes[c], 1e-3) if k else _blurred_ones(small.shape[0], small.shape[1], s)
         low = np.asarray(cv2.merge([q / den for q in planes[:c]])).reshape(small.shape)
+        if k == iters - 1:  # no pass follows to leave pixels out of
+            break
         still = (magnitude(np.subtract(small, low)) >= thr).view(np.uint8)
         out_now = np.asarray(cv2.dilate(still, grow))
         if left_out is not None and np.array_equal(out_now, left_out):
             break
         left_out = out_now
+        if base is None:
+            base = np.empty(small.shape[:2] + (c + 1,), np.float32)
+            base[..., :c] = small
+            base[..., c] = 1.0
         both = np.zeros_like(base)
         cv2.copyTo(base, (out_now == 0).view(np.uint8), both)
     return low
+
+
+@lru_cache(maxsize=8)
+def _blurred_ones(h: int, w: int, sigma_px: float) -> np.ndarray:
+    """The Gaussian of an (h, w) image of ones (1 inside, less near the reflected border: exactly the
+    blurred weights of a pass that leaves nothing out), at least 1e-3; read-only."""
+    out: np.ndarray = np.maximum(blur(np.ones((h, w), np.float32), sigma_px), 1e-3)
+    out.setflags(write=False)
+    return out
 
 
 def upsample(low: np.ndarray, shape: tuple[int, int], box: tuple[int, int, int, int]) -> np.ndarray:
