@@ -24,11 +24,11 @@ Positions are pixel (x = column, y = row) here; the driver turns them into mm.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
-from .rest import RestReference, blur, magnitude, smooth
+from .drift import drift, drift_free, upsample
+from .rest import RestReference, magnitude, smooth
 
 __all__ = ["ContactParams", "PixelContact", "drift", "drift_free", "find_contacts", "threshold", "upsample"]
 
@@ -59,93 +59,6 @@ class PixelContact:
 def threshold(ref: RestReference, p: ContactParams) -> float:
     """The colour change that counts as contact against ``ref`` (grey levels)."""
     return max(p.min_change, p.noise_k * ref.noise)
-
-
-def drift_free(d: np.ndarray, thr: float, sigma_px: float, iters: int, down: int = 4) -> np.ndarray:
-    """``d`` (H, W[, C] signed change) less its low-frequency part (``drift``)."""
-    low = drift(d, thr, sigma_px, iters, down)
-    h, w = d.shape[:2]
-    out: np.ndarray = np.subtract(d, upsample(low, (h, w), (0, h, 0, w)).reshape(d.shape), dtype=np.float32)
-    return out
-
-
-def drift(d: np.ndarray, thr: float, sigma_px: float, iters: int, down: int = 4) -> np.ndarray:
-    """The low-frequency part of ``d`` (H, W[, C] signed change) fitted where there is no contact, at
-    1/``down`` scale (H/down, W/down, C).
-
-    A normalized convolution (a Gaussian of ``sigma_px`` over the pixels counted as background, divided
-    by the same over their weights), at 1/``down`` scale (it is smooth, and a quarter scale costs a
-    sixteenth); after each pass the pixels still changed by ``thr`` or more, grown by 5 small pixels,
-    are left out of the next, so the contact's own change is not subtracted from it (a plain high-pass
-    would: the contact would shrink and its rim break). A pass that leaves out the same pixels as the
-    one before would give the same low part again: the passes stop there. The weighted change and its
-    weights are blurred together (one Gaussian over C + 1 channels)."""
-    import cv2
-
-    h, w = d.shape[:2]
-    small = np.asarray(cv2.resize(d, (max(w // down, 1), max(h // down, 1)), interpolation=cv2.INTER_AREA),
-                       dtype=np.float32)
-    if small.ndim == 2:
-        small = small[..., None]
-    c = small.shape[2]
-    s = sigma_px / down
-    base: np.ndarray | None = None  # the change and a weight of 1 per pixel (C + 1 channels)
-    both = small  # what is blurred: the weighted change (and the weights, after the first pass)
-    grow = np.ones((5, 5), np.uint8)
-    low: np.ndarray = np.zeros_like(small)
-    left_out: np.ndarray | None = None
-    for k in range(iters):
-        planes = cv2.split(blur(both, s))  # planes: numpy divides them at full speed, not pixel by pixel
-        # the first pass weighs every pixel 1: its weights' blur depends on the shape only
-        den = np.maximum(planes[c], 1e-3) if k else _blurred_ones(small.shape[0], small.shape[1], s)
-        low = np.asarray(cv2.merge([q / den for q in planes[:c]])).reshape(small.shape)
-        if k == iters - 1:  # no pass follows to leave pixels out of
-            break
-        still = (magnitude(np.subtract(small, low)) >= thr).view(np.uint8)
-        out_now = np.asarray(cv2.dilate(still, grow))
-        if left_out is not None and np.array_equal(out_now, left_out):
-            break
-        left_out = out_now
-        if base is None:
-            base = np.empty(small.shape[:2] + (c + 1,), np.float32)
-            base[..., :c] = small
-            base[..., c] = 1.0
-        both = np.zeros_like(base)
-        cv2.copyTo(base, (out_now == 0).view(np.uint8), both)
-    return low
-
-
-@lru_cache(maxsize=8)
-def _blurred_ones(h: int, w: int, sigma_px: float) -> np.ndarray:
-    """The Gaussian of an (h, w) image of ones (1 inside, less near the reflected border: exactly the
-    blurred weights of a pass that leaves nothing out), at least 1e-3; read-only."""
-    out: np.ndarray = np.maximum(blur(np.ones((h, w), np.float32), sigma_px), 1e-3)
-    out.setflags(write=False)
-    return out
-
-
-def upsample(low: np.ndarray, shape: tuple[int, int], box: tuple[int, int, int, int]) -> np.ndarray:
-    """Rows ``y0:y1``, columns ``x0:x1`` (``box``) of ``low`` (h, w, C) resized to ``shape`` (bilinear),
-    (y1 - y0, x1 - x0, C). When ``shape`` is a whole multiple of ``low``'s, only the part of ``low`` under
-    the box (and one small pixel around it) is resized: the same values, for the box's cost."""
-    import cv2
-
-    h, w = shape
-    hs, ws, c = low.shape
-    y0, y1, x0, x1 = box
-    if h % hs or w % ws or h // hs != w // ws:
-        part, a0, b0 = low, 0, 0
-        size = (w, h)
-    else:
-        k = h // hs
-        a0, a1 = max(y0 // k - 1, 0), min(-(-y1 // k) + 1, hs)
-        b0, b1 = max(x0 // k - 1, 0), min(-(-x1 // k) + 1, ws)
-        part, size = low[a0:a1, b0:b1], ((b1 - b0) * k, (a1 - a0) * k)
-        a0, b0 = a0 * k, b0 * k
-    up = np.asarray(cv2.resize(np.ascontiguousarray(part if c > 1 else part[..., 0]), size,
-                               interpolation=cv2.INTER_LINEAR)).reshape(size[1], size[0], c)
-    out: np.ndarray = up[y0 - a0:y1 - a0, x0 - b0:x1 - b0]
-    return out
 
 
 def percentile(a: np.ndarray, q: float) -> float:

@@ -20,7 +20,8 @@ import numpy as np
 
 from wott_hub.plugin_api import InvalidInput
 
-__all__ = ["NoRestFrame", "RestCollector", "RestReference", "blur", "change", "magnitude", "smooth"]
+__all__ = ["NoRestFrame", "RestCollector", "RestReference", "blur", "change", "gaussian_kernel", "magnitude",
+           "smooth"]
 
 
 class NoRestFrame(InvalidInput):
@@ -46,13 +47,14 @@ def blur(image: np.ndarray, sigma_px: float) -> np.ndarray:
     float images, a quarter on a uint8 frame (``GaussianBlur`` would need it converted first)."""
     import cv2
 
-    k = _kernel(float(sigma_px))
+    k = gaussian_kernel(float(sigma_px))
     out: np.ndarray = cv2.sepFilter2D(image, cv2.CV_32F, k, k, borderType=cv2.BORDER_REFLECT_101)
     return out
 
 
 @lru_cache(maxsize=8)
-def _kernel(sigma_px: float) -> np.ndarray:
+def gaussian_kernel(sigma_px: float) -> np.ndarray:
+    """(size, 1) float32: ``GaussianBlur``'s kernel for float images (4 sigma either side)."""
     import cv2
 
     size = int(round(sigma_px * 8 + 1)) | 1
