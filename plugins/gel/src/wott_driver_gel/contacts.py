@@ -1,7 +1,7 @@
 """Contacts of a marker-less gel: colour change against the rest reference, segmented.
 
 Per frame: the smoothed frame's colour change from the reference (``rest.change``), less its
-low-frequency part when anything changed (``drift_free``: the LEDs warming up or the exposure moving
+low-frequency part when anything changed (``drift.py``: the LEDs warming up or the exposure moving
 between the rest reference and now tint the whole image smoothly, a contact changes a small patch
 sharply); pixels above a threshold (``min_change`` grey levels, or ``noise_k`` times the reference's own noise
 when that is larger: a noisy camera raises its own bar) form a mask, opened to drop specks;
