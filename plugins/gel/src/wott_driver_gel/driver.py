@@ -42,7 +42,7 @@ __all__ = ["FrameReader", "GelDriver", "GelEstimate", "GelEstimator"]
 @dataclass(frozen=True, slots=True, eq=False)
 class GelEstimate:
     contacts: list[PixelContact]
-    change: np.ndarray  # (H, W) colour change from the reference, grey levels
+    change: np.ndarray  # (H, W) change from the reference, grey levels (drift-free where contact can be)
     depth: np.ndarray | None = None  # (H/scale, W/scale) mm, calibrated devices, touched frames
     shear: np.ndarray | None = None  # (N, 2) mm, the nodes' in-plane displacement (a marker gel)
 
