@@ -17,11 +17,16 @@ subscribed or unsubscribed a topic), ``HEALTH`` (the guard's counters, every ``T
 (its log lines, written by the hub's logging). The relay ends at ``STOP`` or when the hub's end
 closes (the hub died): it never outlives the hub. Signals meant for the hub (a terminal's Ctrl-C to
 the process group) are ignored: the hub stops it.
+
+It runs ``NICE`` steps below the hub's priority (its threads, the SDK's, inherit it): on a busy
+computer (a robot's is never idle) the kernel gives the CPU to the devices' pipelines first, and the
+viewers are what waits (each client's queue then loses its oldest messages, counted by the SDK).
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import signal
 import socket
 import sys
@@ -32,6 +37,9 @@ from typing import Any
 from . import relay_wire as W
 
 log = logging.getLogger("wott_hub.foxglove")
+
+NICE = 10
+"""How many steps of ``nice`` below the hub: its CPU weight is ~1/10 of the hub's threads' under load."""
 
 
 class _Forward(logging.Handler):
@@ -156,6 +164,10 @@ class Relay:
 def main() -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the hub's signals: the hub stops this process
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        os.nice(NICE)  # before any thread starts: the SDK's threads inherit it
+    except OSError:  # not allowed (a hub already at the lowest priority): served as it is
+        pass
     sock = socket.socket(fileno=int(sys.argv[1]))
     started = time.monotonic()
     try:
