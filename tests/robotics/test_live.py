@@ -124,6 +124,36 @@ def test_only_what_a_client_subscribes_to_is_built(tmp_path, press_scene, run, w
     run(main())
 
 
+def test_each_message_leaves_the_hub_once_however_many_subscribe(tmp_path, press_scene, run, wait_for):
+    """Issue 48, item 6: the fan-out to the viewers is the relay process's (``robotics/relay.py``); the hub
+    encodes each message once and writes it once to the relay, so three subscribers of the skin packets
+    cost the hub what one does: one message per record (the SDK copied it once per client, in the hub,
+    holding the GIL)."""
+    from wott_hub.events.record import KIND_EVENT
+    from wott_hub.hub import Hub
+
+    async def main():
+        async with Hub(_config(tmp_path, press_scene, history=False)) as hub:
+            live = hub._foxglove
+            clients = [await _client(hub, wait_for) for _ in range(3)]
+            for c in clients:
+                await c.subscribe(SKIN)
+            await wait_for(lambda: all(len(c.of(SKIN)) >= 5 for c in clients), what="skin packets at all 3")
+            counts = hub._plane.stream("pad").counts
+            name = SKIN.rpartition("/")[2]
+            assert hub._plane.wants("pad", KIND_EVENT, name)
+            records0, sent0 = counts[name], live.sent
+            await wait_for(lambda: counts[name] - records0 >= 30, what="30 more skin packets")
+            records, sent = counts[name] - records0, live.sent - sent0
+            assert records - 2 <= sent <= records + 2, (records, sent)  # once each, not once per client
+            await wait_for(lambda: live.health()["relaySent"] >= live.sent - 5, what="the relay's counters")
+            assert live.health()["clients"] == 3 and live.health()["notSent"] == 0
+            for c in clients:
+                await c.close()
+
+    run(main())
+
+
 def _their_descriptor(pid: int, fd: int) -> int:
     """A duplicate, here, of process ``pid``'s descriptor ``fd`` (Linux's ``pidfd_getfd``; root or ptrace
     rights over it: CI runs as root)."""

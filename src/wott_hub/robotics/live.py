@@ -17,8 +17,9 @@ Contract (docs/robotics.md):
 - the hub is never slowed or stopped by a client: the SDK runs in a process of its own
   (``relay.py``: its ``Channel.log`` copies a message once per client holding the GIL, which in the
   hub's process every device's pipeline waited for). The hub encodes each message once and writes it
-  once to the relay's socket, from a thread of its own (``_Outbox``: bounded in bytes, ``RELAY_BYTES``;
-  beyond, a message is not sent and counted), whatever the number of viewers. There each client has
+  once to the relay's socket (``_Outbox``: one ``sendmsg`` on the loop; what the socket does not take
+  waits, bounded in bytes, ``RELAY_BYTES``; beyond, a message is not sent and counted), whatever the
+  number of viewers. There each client has
   its own queue (``backlog`` messages; a slow client loses its oldest, alone), and
   ``guard.FoxgloveGuard`` bounds it in bytes: a client that stops reading is cut, so are clients
   beyond ``MAX_CLIENTS`` and one that sends invalid messages (whose log lines are sampled);
@@ -74,52 +75,88 @@ STOP_S = 5.0  # the relay's end after STOP, at most; then it is killed
 
 
 class _Outbox:
-    """Frames for the relay, written by a thread of their own (``sendmsg`` leaves the GIL while the
-    kernel copies): the hub's loop only appends. Bounded in bytes: a ``LOG`` frame beyond
-    ``RELAY_BYTES`` is refused and counted; control frames (channels, stop) always go."""
+    """Frames for the relay, written on the hub's loop to a non-blocking socket: a message costs the loop
+    one ``sendmsg`` (the kernel copies it once), whatever the number of viewers. What the socket does not
+    take waits here and goes when it is writable (``add_writer``), bounded in bytes: a ``LOG`` frame
+    that would take it past ``RELAY_BYTES`` is refused and counted; control frames always go. (A thread
+    writing a blocking socket cost more: every message woke it, and each wake-up took the GIL from the
+    devices' pipelines on a busy machine.)"""
 
-    def __init__(self, sock: socket.socket) -> None:
+    def __init__(self, sock: socket.socket, loop: asyncio.AbstractEventLoop) -> None:
+        sock.setblocking(False)
         self.sock = sock
-        self.frames: deque[tuple[bytes, bytes] | None] = deque()  # None: the thread ends
-        self.bytes = 0
+        self.loop = loop
+        self.pending: deque[bytes | memoryview] = deque()
+        self.bytes = 0  # pending
         self.refused = 0
         self.failed = ""
-        self.cond = threading.Condition()
-        self.thread = threading.Thread(target=self._run, name="foxglove-outbox", daemon=True)
-        self.thread.start()
 
-    def put(self, frame: tuple[bytes, bytes] | None, *, droppable: bool = True) -> bool:
-        n = len(frame[1]) if frame is not None else 0
-        with self.cond:
-            if droppable and self.bytes + n > RELAY_BYTES:
+    def put(self, frame: tuple[bytes, bytes], *, droppable: bool = True) -> bool:
+        head, body = frame
+        if self.failed:
+            return False
+        total = len(head) + len(body)
+        if self.pending:  # behind what waits: in order, or not at all
+            if droppable and self.bytes + total > RELAY_BYTES:
                 self.refused += 1
                 return False
-            self.frames.append(frame)
-            self.bytes += n
-            self.cond.notify()
+            self.pending += (head, body)
+            self.bytes += total
+            return True
+        try:
+            sent = self.sock.sendmsg([head, body])
+        except BlockingIOError:
+            sent = 0
+        except OSError as e:  # the relay is gone: the reader says so
+            self.failed = str(e)
+            return False
+        if sent == total:
+            return True
+        if sent < len(head):  # a frame begun is finished whatever the bound
+            self.pending += (memoryview(head)[sent:], body)
+        else:
+            self.pending.append(memoryview(body)[sent - len(head):])
+        self.bytes += total - sent
+        self.loop.add_writer(self.sock.fileno(), self._flush)
         return True
 
-    def _run(self) -> None:
-        frames, cond = self.frames, self.cond
-        while True:
-            with cond:
-                while not frames:
-                    cond.wait()
-                frame = frames.popleft()
-            if frame is None:
-                return
+    def _flush(self) -> None:
+        pending = self.pending
+        while pending:
             try:
-                W.send(self.sock, frame)
-            except OSError as e:  # the relay is gone: the reader says so
-                self.failed = str(e)
+                sent = self.sock.sendmsg([pending[i] for i in range(min(len(pending), 64))])
+            except BlockingIOError:
                 return
-            finally:
-                with cond:
-                    self.bytes -= len(frame[1])
+            except OSError as e:
+                self.failed = str(e)
+                pending.clear()
+                self.bytes = 0
+                break
+            self.bytes -= sent
+            while sent:
+                n = len(pending[0])
+                if sent >= n:
+                    pending.popleft()
+                    sent -= n
+                else:
+                    pending[0] = memoryview(pending[0])[sent:]
+                    sent = 0
+        self.loop.remove_writer(self.sock.fileno())
 
     def close(self, timeout: float) -> None:
-        self.put(None, droppable=False)
-        self.thread.join(timeout)
+        """What waits, written within ``timeout`` (the hub stops: the loop no longer writes it)."""
+        if self.pending:
+            self.loop.remove_writer(self.sock.fileno())
+        if self.failed:
+            return
+        self.sock.settimeout(timeout)
+        try:
+            for part in self.pending:
+                self.sock.sendall(part)
+        except OSError as e:
+            self.failed = str(e)
+        self.pending.clear()
+        self.bytes = 0
 
 
 class _Tap:
@@ -148,7 +185,7 @@ class FoxgloveLive:
         self.tls = tls
         self.mapping = FleetMapping("foxglove", scene_hz=cfg.scene_hz, color_max_mm=cfg.color_max_mm)
         self.relay: subprocess.Popen[bytes] | None = None
-        self._sock: socket.socket | None = None
+        self._socks: list[socket.socket] = []
         self._outbox: _Outbox | None = None
         self._port: int | None = None
         self._relay_health: dict[str, Any] = {}
@@ -173,20 +210,24 @@ class FoxgloveLive:
     def start(self) -> None:
         """Start the relay process and its server (the port is known after this: ``port``)."""
         self._loop = asyncio.get_running_loop()
-        mine, theirs = socket.socketpair()
-        self.relay = subprocess.Popen([sys.executable, "-m", "wott_hub.robotics.relay", str(theirs.fileno())],
-                                      pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
-        theirs.close()
-        self._sock = mine
-        W.send(mine, W.control(W.INIT, {
+        # two socket pairs: the hub writes "down" without blocking (its loop), reads "up" in a thread
+        down, down_theirs = socket.socketpair()
+        up, up_theirs = socket.socketpair()
+        fds = (down_theirs.fileno(), up_theirs.fileno())
+        self.relay = subprocess.Popen([sys.executable, "-m", "wott_hub.robotics.relay", *map(str, fds)],
+                                      pass_fds=fds, stdin=subprocess.DEVNULL)
+        down_theirs.close()
+        up_theirs.close()
+        self._socks = [down, up]
+        W.send(down, W.control(W.INIT, {
             "name": self.name, "host": self.cfg.host, "port": self.cfg.port, "backlog": self.cfg.backlog,
             "tls": self.tls, "level": logging.getLogger("wott_hub").getEffectiveLevel()}))
-        mine.settimeout(START_S)
+        up.settimeout(START_S)
         try:
-            ready = self._ready(mine)
+            ready = self._ready(up)
         except (OSError, TimeoutError) as e:
             ready = {"error": f"the relay process did not start: {e}"}
-        mine.settimeout(None)
+        up.settimeout(None)
         if "error" in ready:
             import errno
 
@@ -199,8 +240,8 @@ class FoxgloveLive:
         if not ready["nagle"]:
             log.warning("Foxglove: the listener on port %s was not found to turn Nagle's algorithm off "
                         "(not Linux?): messages may wait up to 40 ms for the client's ACK", self._port)
-        self._outbox = _Outbox(mine)
-        threading.Thread(target=self._read, args=(mine,), name="foxglove-relay", daemon=True).start()
+        self._outbox = _Outbox(down, self._loop)
+        threading.Thread(target=self._read, args=(up,), name="foxglove-relay", daemon=True).start()
         self._channel(self._tf_channel(), "")
 
     @staticmethod
@@ -269,9 +310,9 @@ class FoxgloveLive:
                 log.warning("Foxglove: the relay process did not end in %.0f s; killed", STOP_S)
                 relay.kill()
                 relay.wait(STOP_S)
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
+        for sock in self._socks:
+            sock.close()
+        self._socks = []
 
     @property
     def port(self) -> int | None:

@@ -10,12 +10,13 @@ encoded once by the mapping, sent once whatever the number of viewers) and this 
 GIL, does the per-client work: the sockets, ``nagle.disable_nagle`` and ``guard.FoxgloveGuard`` (which
 read this process's own sockets) live here.
 
-The hub starts it (``python -m wott_hub.robotics.relay <fd>``) with one end of a socket pair; frames
-are ``relay_wire``'s. Hub -> relay: ``INIT`` (the server's options), ``CHANNEL``/``CLOSE``, ``LOG``,
-``STOP``. Relay -> hub: ``READY`` (the port, or why the server did not start), ``SUB`` (a client
-subscribed or unsubscribed a topic), ``HEALTH`` (the guard's counters, every ``TICK_S``), ``LOGREC``
-(its log lines, written by the hub's logging). The relay ends at ``STOP`` or when the hub's end
-closes (the hub died): it never outlives the hub. Signals meant for the hub (a terminal's Ctrl-C to
+The hub starts it (``python -m wott_hub.robotics.relay <down fd> <up fd>``) with one end of each of two
+socket pairs (it reads the first, writes the second); frames are ``relay_wire``'s. Hub -> relay:
+``INIT`` (the server's options), ``CHANNEL``/``CLOSE``, ``LOG``, ``STOP``. Relay -> hub: ``READY``
+(the port, or why the server did not start), ``SUB`` (a client subscribed or unsubscribed a topic),
+``HEALTH`` (the guard's counters, every ``TICK_S``), ``LOGREC`` (its log lines, written by the hub's
+logging). The relay ends at ``STOP`` or when the hub's end closes (the hub died): it never outlives
+the hub. Signals meant for the hub (a terminal's Ctrl-C to
 the process group) are ignored: the hub stops it.
 
 It runs ``NICE`` steps below the hub's priority (its threads, the SDK's, inherit it): on a busy
@@ -60,8 +61,9 @@ class _Forward(logging.Handler):
 
 
 class Relay:
-    def __init__(self, sock: socket.socket) -> None:
-        self.sock = sock
+    def __init__(self, down: socket.socket, up: socket.socket) -> None:
+        self.sock = down  # what the hub sends
+        self.up = up  # what this process tells it
         self._lock = threading.Lock()  # one writer at a time: the main thread, the ticker, the SDK's
         self.channels: dict[int, Any] = {}  # id -> foxglove.Channel
         self.sent = 0
@@ -71,7 +73,7 @@ class Relay:
     def tell(self, kind: int, value: Any) -> None:
         frame = W.control(kind, value)
         with self._lock:
-            W.send(self.sock, frame)
+            W.send(self.up, frame)
 
     def run(self) -> int:
         first = W.recv(self.sock)
@@ -168,10 +170,10 @@ def main() -> int:
         os.nice(NICE)  # before any thread starts: the SDK's threads inherit it
     except OSError:  # not allowed (a hub already at the lowest priority): served as it is
         pass
-    sock = socket.socket(fileno=int(sys.argv[1]))
+    down, up = (socket.socket(fileno=int(fd)) for fd in sys.argv[1:3])
     started = time.monotonic()
     try:
-        return Relay(sock).run()
+        return Relay(down, up).run()
     except Exception as e:  # said to the hub's log if it still listens, else to stderr
         print(f"wott-hub Foxglove relay failed after {time.monotonic() - started:.1f} s: {e!r}",
               file=sys.stderr)
