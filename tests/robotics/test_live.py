@@ -124,9 +124,56 @@ def test_only_what_a_client_subscribes_to_is_built(tmp_path, press_scene, run, w
     run(main())
 
 
+def test_each_message_leaves_the_hub_once_however_many_subscribe(tmp_path, press_scene, run, wait_for):
+    """Issue 48, item 6: the fan-out to the viewers is the relay process's (``robotics/relay.py``); the hub
+    encodes each message once and writes it once to the relay, so three subscribers of the skin packets
+    cost the hub what one does: one message per record (the SDK copied it once per client, in the hub,
+    holding the GIL)."""
+    from wott_hub.events.record import KIND_EVENT
+    from wott_hub.hub import Hub
+
+    async def main():
+        async with Hub(_config(tmp_path, press_scene, history=False)) as hub:
+            live = hub._foxglove
+            clients = [await _client(hub, wait_for) for _ in range(3)]
+            for c in clients:
+                await c.subscribe(SKIN)
+            await wait_for(lambda: all(len(c.of(SKIN)) >= 5 for c in clients), what="skin packets at all 3")
+            counts = hub._plane.stream("pad").counts
+            name = SKIN.rpartition("/")[2]
+            assert hub._plane.wants("pad", KIND_EVENT, name)
+            records0, sent0 = counts[name], live.sent
+            await wait_for(lambda: counts[name] - records0 >= 30, what="30 more skin packets")
+            records, sent = counts[name] - records0, live.sent - sent0
+            assert records - 2 <= sent <= records + 2, (records, sent)  # once each, not once per client
+            await wait_for(lambda: live.health()["relaySent"] >= live.sent - 5, what="the relay's counters")
+            assert live.health()["clients"] == 3 and live.health()["notSent"] == 0
+            for c in clients:
+                await c.close()
+
+    run(main())
+
+
+def _their_descriptor(pid: int, fd: int) -> int:
+    """A duplicate, here, of process ``pid``'s descriptor ``fd`` (Linux's ``pidfd_getfd``; root or ptrace
+    rights over it: CI runs as root)."""
+    import ctypes
+    import os
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    pidfd = os.pidfd_open(pid)
+    try:
+        dup = libc.syscall(438, pidfd, fd, 0)  # SYS_pidfd_getfd
+        assert dup >= 0, os.strerror(ctypes.get_errno())
+        return int(dup)
+    finally:
+        os.close(pidfd)
+
+
 def test_messages_are_not_held_by_nagle(tmp_path, press_scene, run, wait_for):
-    """The SDK accepts clients without TCP_NODELAY; the hub turns it on through the listener
-    (``robotics.nagle``): small messages would otherwise wait for the client's delayed ACK."""
+    """The SDK accepts clients without TCP_NODELAY; the relay turns it on through the listener
+    (``robotics.nagle``): small messages would otherwise wait for the client's delayed ACK. The sockets
+    are the relay process's (``robotics/relay.py``), none the hub's."""
     import socket
 
     from wott_hub.hub import Hub
@@ -135,13 +182,12 @@ def test_messages_are_not_held_by_nagle(tmp_path, press_scene, run, wait_for):
     async def main():
         async with Hub(_config(tmp_path, press_scene, history=False)) as hub:
             c = await _client(hub, wait_for)
-            accepted = descriptors(hub._foxglove.port, ESTABLISHED)
+            relay = hub._foxglove.relay.pid
+            assert descriptors(hub._foxglove.port, ESTABLISHED) == []  # not in the hub's process
+            accepted = descriptors(hub._foxglove.port, ESTABLISHED, pid=relay)
             assert len(accepted) == 1
-            with socket.socket(fileno=accepted[0]) as s:
-                try:
-                    assert s.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
-                finally:
-                    s.detach()  # the SDK's descriptor, not ours to close
+            with socket.socket(fileno=_their_descriptor(relay, accepted[0])) as s:
+                assert s.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
             await c.close()
 
     run(main())

@@ -21,7 +21,10 @@ One job per module; no module imports this package's ``__init__``, which holds o
 | ``mapping.py`` | the one mapping: a Thing's channels and what each record becomes; the scene throttle |
 | ``layout.py`` | a Foxglove layout that opens on a fleet's skins |
 | ``config.py`` | the ``[foxglove]`` table (light: imports no foxglove) |
-| ``live.py`` | the live Foxglove WebSocket server (``foxglove-sdk``), fed by taps on the event plane |
+| ``live.py`` | the live Foxglove endpoint, fed by taps on the event plane: a message encoded, sent once |
+| ``relay.py`` | a process running ``foxglove-sdk``'s server and its per-client fan-out, off the hub's GIL |
+| ``relay_wire.py`` | the frames between the hub and its relay |
+| ``guard.py``, ``nagle.py`` | the relay's clients kept to a bound; Nagle's algorithm off on their sockets |
 
 Heavy libraries (``foxglove``, ``rosbags``) are imported inside the modules that use them, which
 are loaded only by an export or a hub with ``[foxglove]`` on.

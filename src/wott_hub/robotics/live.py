@@ -14,8 +14,13 @@ Contract (docs/robotics.md):
   every subscriber, 986 MB in 30 s from one client subscribing in a loop);
 - scenes at most ``scene_hz`` per device, the latest state drawn when its slot comes (a timer on
   the hub's loop); raw channels carry every record, as the hub published it;
-- the hub is never slowed or stopped by a client: the SDK runs the sockets in its own threads,
-  each client has its own queue (``backlog`` messages; a slow client loses its oldest, alone), and
+- the hub is never slowed or stopped by a client: the SDK runs in a process of its own
+  (``relay.py``: its ``Channel.log`` copies a message once per client holding the GIL, which in the
+  hub's process every device's pipeline waited for). The hub encodes each message once and writes it
+  once to the relay's socket (``_Outbox``: one ``sendmsg`` on the loop; what the socket does not take
+  waits, bounded in bytes, ``RELAY_BYTES``; beyond, a message is not sent and counted), whatever the
+  number of viewers. There each client has
+  its own queue (``backlog`` messages; a slow client loses its oldest, alone), and
   ``guard.FoxgloveGuard`` bounds it in bytes: a client that stops reading is cut, so are clients
   beyond ``MAX_CLIENTS`` and one that sends invalid messages (whose log lines are sampled);
   a client's bad request (garbage, an unknown channel) gets an error status from the SDK and
@@ -32,19 +37,21 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
+import subprocess
+import sys
+import threading
 import time
+from collections import deque
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
-import foxglove
-from foxglove.websocket import ChannelView, Client, ServerListener
-
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
 
+from . import relay_wire as W
 from .channel import Channel, Out
-from .guard import TICK_S, FoxgloveGuard
+from .guard import CLIENT_MAX_BYTES
 from .mapping import CONTACTS, LOG_EVENTS, FleetMapping
-from .nagle import disable_nagle
 from .names import TF_TOPIC
 from .raw_signals import DISPLACEMENT_EVENT, ImageFrame, TaxelGrid
 
@@ -54,25 +61,102 @@ if TYPE_CHECKING:
 
     from .config import FoxgloveConfig
 
-__all__ = ["STATIC_MIN_S", "FoxgloveLive"]
+__all__ = ["RELAY_BYTES", "STATIC_MIN_S", "FoxgloveLive"]
 
 log = logging.getLogger("wott_hub.foxglove")
 
 STATIC_MIN_S = 1.0
 """A topic's static data (a mesh, ``/tf``) is sent at most this often, however many subscribe."""
+RELAY_BYTES = CLIENT_MAX_BYTES
+"""What waits for the relay's socket at most (the relay fell behind: a loaded machine); beyond, a
+message is not sent to the viewers, and counted (``notSent``): the sensors never wait for it."""
+START_S = 30.0  # the relay's server bound, at most (a Python start and the SDK's import: ~0.5 s)
+STOP_S = 5.0  # the relay's end after STOP, at most; then it is killed
 
 
-class _Listener(ServerListener):
-    """The SDK's callbacks (its threads): handed to the hub's loop, where the state lives."""
+class _Outbox:
+    """Frames for the relay, written on the hub's loop to a non-blocking socket: a message costs the loop
+    one ``sendmsg`` (the kernel copies it once), whatever the number of viewers. What the socket does not
+    take waits here and goes when it is writable (``add_writer``), bounded in bytes: a ``LOG`` frame
+    that would take it past ``RELAY_BYTES`` is refused and counted; control frames always go. (A thread
+    writing a blocking socket cost more: every message woke it, and each wake-up took the GIL from the
+    devices' pipelines on a busy machine.)"""
 
-    def __init__(self, live: FoxgloveLive) -> None:
-        self.live = live
+    def __init__(self, sock: socket.socket, loop: asyncio.AbstractEventLoop) -> None:
+        sock.setblocking(False)
+        self.sock = sock
+        self.loop = loop
+        self.pending: deque[bytes | memoryview] = deque()
+        self.bytes = 0  # pending
+        self.refused = 0
+        self.failed = ""
 
-    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
-        self.live.call_soon(self.live.subscribed, channel.topic, 1)
+    def put(self, frame: tuple[bytes, bytes], *, droppable: bool = True) -> bool:
+        head, body = frame
+        if self.failed:
+            return False
+        total = len(head) + len(body)
+        if self.pending:  # behind what waits: in order, or not at all
+            if droppable and self.bytes + total > RELAY_BYTES:
+                self.refused += 1
+                return False
+            self.pending += (head, body)
+            self.bytes += total
+            return True
+        try:
+            sent = self.sock.sendmsg([head, body])
+        except BlockingIOError:
+            sent = 0
+        except OSError as e:  # the relay is gone: the reader says so
+            self.failed = str(e)
+            return False
+        if sent == total:
+            return True
+        if sent < len(head):  # a frame begun is finished whatever the bound
+            self.pending += (memoryview(head)[sent:], body)
+        else:
+            self.pending.append(memoryview(body)[sent - len(head):])
+        self.bytes += total - sent
+        self.loop.add_writer(self.sock.fileno(), self._flush)
+        return True
 
-    def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
-        self.live.call_soon(self.live.subscribed, channel.topic, -1)
+    def _flush(self) -> None:
+        pending = self.pending
+        while pending:
+            try:
+                sent = self.sock.sendmsg([pending[i] for i in range(min(len(pending), 64))])
+            except BlockingIOError:
+                return
+            except OSError as e:
+                self.failed = str(e)
+                pending.clear()
+                self.bytes = 0
+                break
+            self.bytes -= sent
+            while sent:
+                n = len(pending[0])
+                if sent >= n:
+                    pending.popleft()
+                    sent -= n
+                else:
+                    pending[0] = memoryview(pending[0])[sent:]
+                    sent = 0
+        self.loop.remove_writer(self.sock.fileno())
+
+    def close(self, timeout: float) -> None:
+        """What waits, written within ``timeout`` (the hub stops: the loop no longer writes it)."""
+        if self.pending:
+            self.loop.remove_writer(self.sock.fileno())
+        if self.failed:
+            return
+        self.sock.settimeout(timeout)
+        try:
+            for part in self.pending:
+                self.sock.sendall(part)
+        except OSError as e:
+            self.failed = str(e)
+        self.pending.clear()
+        self.bytes = 0
 
 
 class _Tap:
@@ -100,17 +184,20 @@ class FoxgloveLive:
         self.name = name
         self.tls = tls
         self.mapping = FleetMapping("foxglove", scene_hz=cfg.scene_hz, color_max_mm=cfg.color_max_mm)
-        self.context: foxglove.Context | None = None
-        self.server: Any = None
-        self.channels: dict[str, foxglove.Channel] = {}  # topic -> the SDK's channel
+        self.relay: subprocess.Popen[bytes] | None = None
+        self._socks: list[socket.socket] = []
+        self._outbox: _Outbox | None = None
+        self._port: int | None = None
+        self._relay_health: dict[str, Any] = {}
+        self._stopping = False
+        self._next_id = 0
+        self.channels: dict[str, int] = {}  # topic -> its id with the relay
         self.owner: dict[str, str] = {}  # topic -> its Thing ("" for /tf)
         self.subscribers: dict[str, int] = {}  # topic -> clients subscribed
         self.active: dict[str, int] = {}  # Thing -> subscriptions to its channels
         self.sent = 0
         self.bytes = 0  # logged to the endpoint (what a stalled client's queue can hold at most)
         self.errors = 0
-        self.guard: FoxgloveGuard | None = None
-        self._ticker: asyncio.TimerHandle | None = None
         self._meshes: dict[str, bytes] = {}  # Thing -> its mesh scene, encoded once
         self._static_last: dict[str, float] = {}  # topic -> when its static data was last sent
         self._static_due: set[str] = set()  # topics whose static data is scheduled
@@ -121,59 +208,115 @@ class FoxgloveLive:
     # --- lifecycle ----------------------------------------------------------------------------
 
     def start(self) -> None:
-        """Bind and serve (the port is known after this: ``port``)."""
+        """Start the relay process and its server (the port is known after this: ``port``)."""
         self._loop = asyncio.get_running_loop()
-        self.context = foxglove.Context()
-        cert, key = self.tls if self.tls is not None else (None, None)
+        # two socket pairs: the hub writes "down" without blocking (its loop), reads "up" in a thread
+        down, down_theirs = socket.socketpair()
+        up, up_theirs = socket.socketpair()
+        fds = (down_theirs.fileno(), up_theirs.fileno())
+        self.relay = subprocess.Popen([sys.executable, "-m", "wott_hub.robotics.relay", *map(str, fds)],
+                                      pass_fds=fds, stdin=subprocess.DEVNULL)
+        down_theirs.close()
+        up_theirs.close()
+        self._socks = [down, up]
+        W.send(down, W.control(W.INIT, {
+            "name": self.name, "host": self.cfg.host, "port": self.cfg.port, "backlog": self.cfg.backlog,
+            "tls": self.tls, "level": logging.getLogger("wott_hub").getEffectiveLevel()}))
+        up.settimeout(START_S)
         try:
-            self.server = foxglove.start_server(
-                name=self.name, host=self.cfg.host, port=self.cfg.port, context=self.context,
-                server_listener=_Listener(self), capabilities=[],
-                message_backlog_size=self.cfg.backlog, tls_cert=cert, tls_key=key)
-        except RuntimeError as e:  # the SDK's FoxgloveError: a port in use, an address not here
+            ready = self._ready(up)
+        except (OSError, TimeoutError) as e:
+            ready = {"error": f"the relay process did not start: {e}"}
+        up.settimeout(None)
+        if "error" in ready:
             import errno
 
-            text = str(e).removeprefix("FoxgloveError: ")
+            self._end_relay()
+            text = ready["error"]
             code = errno.EADDRINUSE if "in use" in text else errno.EADDRNOTAVAIL
             raise OSError(code, f"the Foxglove endpoint on {self.cfg.host}:{self.cfg.port}: {text} "
-                                "(choose another with --foxglove-port or [foxglove] port)") from None
-        if not disable_nagle(self.port or 0):
+                                "(choose another with --foxglove-port or [foxglove] port)")
+        self._port = int(ready["port"])
+        if not ready["nagle"]:
             log.warning("Foxglove: the listener on port %s was not found to turn Nagle's algorithm off "
-                        "(not Linux?): messages may wait up to 40 ms for the client's ACK", self.port)
+                        "(not Linux?): messages may wait up to 40 ms for the client's ACK", self._port)
+        self._outbox = _Outbox(down, self._loop)
+        threading.Thread(target=self._read, args=(up,), name="foxglove-relay", daemon=True).start()
         self._channel(self._tf_channel(), "")
-        self.guard = FoxgloveGuard(self.port or 0, lambda: self.bytes, self.call_soon)
-        self.guard.install()
-        self._ticker = self._loop.call_later(TICK_S, self._tick)
 
-    def _tick(self) -> None:
-        if self.guard is None or self._loop is None:
+    @staticmethod
+    def _ready(sock: socket.socket) -> dict[str, Any]:
+        """The relay's ``READY`` (its log lines before it are written as they come)."""
+        while True:
+            frame = W.recv(sock)
+            if frame is None:
+                return {"error": "the relay process ended before its server started"}
+            kind, body = frame
+            if kind == W.READY:
+                return dict(body)
+            if kind == W.LOGREC:
+                level, name, text = body
+                logging.getLogger(name).log(level, "%s", text)
+
+    def _read(self, sock: socket.socket) -> None:
+        """The relay's frames (a thread): subscriptions to the hub's loop, health kept, log lines written."""
+        while True:
+            try:
+                frame = W.recv(sock)
+            except OSError:
+                frame = None
+            if frame is None:
+                self.call_soon(self._relay_ended)
+                return
+            kind, body = frame
+            if kind == W.SUB:
+                self.call_soon(self.subscribed, *body)
+            elif kind == W.HEALTH:
+                self._relay_health = body
+            elif kind == W.LOGREC:
+                level, name, text = body
+                logging.getLogger(name).log(level, "%s", text)
+
+    def _relay_ended(self) -> None:
+        if self._stopping:
             return
-        try:
-            self.guard.tick()
-        except Exception:  # the guard's failure must not end the endpoint
-            log.exception("Foxglove: watching the clients failed")
-        self._ticker = self._loop.call_later(TICK_S, self._tick)
+        code = self.relay.poll() if self.relay is not None else None
+        log.error("Foxglove: the relay process ended (exit code %s): the endpoint is down until the hub "
+                  "restarts", code)
+        self._relay_health = {**self._relay_health, "relay": "ended"}
+        self.subscribers.clear()
+        self.active.clear()
 
     def stop(self) -> None:
-        if self._ticker is not None:
-            self._ticker.cancel()
-            self._ticker = None
-        if self.guard is not None:
-            self.guard.uninstall()
+        self._stopping = True
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
-        if self.server is not None:
-            self.server.stop()
-            self.server = None
-        for ch in self.channels.values():
-            ch.close()
+        if self._outbox is not None:
+            self._outbox.put(W.control(W.STOP, None), droppable=False)
+            self._outbox.close(STOP_S)
+            self._outbox = None
+        self._end_relay()
         self.channels.clear()
         self.owner.clear()
+        self._port = None
+
+    def _end_relay(self) -> None:
+        relay, self.relay = self.relay, None
+        if relay is not None:
+            try:
+                relay.wait(STOP_S)
+            except subprocess.TimeoutExpired:
+                log.warning("Foxglove: the relay process did not end in %.0f s; killed", STOP_S)
+                relay.kill()
+                relay.wait(STOP_S)
+        for sock in self._socks:
+            sock.close()
+        self._socks = []
 
     @property
     def port(self) -> int | None:
-        return None if self.server is None else int(self.server.port)
+        return self._port
 
     @property
     def url(self) -> str | None:
@@ -209,7 +352,9 @@ class FoxgloveLive:
         self.mapping.remove(served.id)
         self._meshes.pop(served.id, None)
         for topic in [t for t, owner in self.owner.items() if owner == served.id]:
-            self.channels.pop(topic).close()
+            cid = self.channels.pop(topic)
+            if self._outbox is not None:
+                self._outbox.put(W.control(W.CLOSE, cid), droppable=False)
             del self.owner[topic]
             self.subscribers.pop(topic, None)
         self.active.pop(served.id, None)
@@ -242,15 +387,24 @@ class FoxgloveLive:
 
         return FoxgloveEncoder.tf_channel()
 
-    def _channel(self, ch: Channel, owner: str) -> foxglove.Channel:
+    def _channel(self, ch: Channel, owner: str) -> int:
         found = self.channels.get(ch.topic)
         if found is None:
-            schema = foxglove.Schema(name=ch.schema_name, encoding=ch.schema_encoding, data=ch.schema)
-            found = self.channels[ch.topic] = foxglove.Channel(
-                ch.topic, schema=schema, message_encoding=ch.encoding, context=self.context,
-                metadata=dict(ch.metadata))
+            self._next_id += 1
+            found = self.channels[ch.topic] = self._next_id
             self.owner[ch.topic] = owner
+            if self._outbox is not None:
+                self._outbox.put(W.control(W.CHANNEL, (
+                    found, ch.topic, ch.schema_name, ch.schema_encoding, ch.schema, ch.encoding,
+                    dict(ch.metadata))), droppable=False)
         return found
+
+    def _log(self, cid: int, payload: bytes, t_ns: int) -> None:
+        """One message to the relay, once, whatever the number of viewers (they are the relay's)."""
+        outbox = self._outbox
+        if outbox is not None and outbox.put(W.log_frame(cid, t_ns, payload)):
+            self.sent += 1
+            self.bytes += len(payload)
 
     # --- subscriptions (on the hub's loop) ------------------------------------------------------
 
@@ -297,11 +451,9 @@ class FoxgloveLive:
             if not outs:
                 return
             encoded = self._meshes[owner] = outs[0].payload
-        ch = self.channels.get(topic)
-        if ch is not None:
-            ch.log(encoded, log_time=now)
-            self.sent += 1
-            self.bytes += len(encoded)
+        cid = self.channels.get(topic)
+        if cid is not None:
+            self._log(cid, encoded, now)
 
     def wanted(self, topic: str) -> bool:
         return self.subscribers.get(topic, 0) > 0
@@ -310,13 +462,11 @@ class FoxgloveLive:
 
     def _send(self, outs: list[Out]) -> None:
         for o in outs:
-            ch = self.channels.get(o.channel.topic)
-            if ch is None:  # a channel first met now (a camera's): advertised from now on
-                ch = self._channel(o.channel, dict(o.channel.metadata).get("thing", ""))
+            cid = self.channels.get(o.channel.topic)
+            if cid is None:  # a channel first met now (a camera's): advertised from now on
+                self._channel(o.channel, dict(o.channel.metadata).get("thing", ""))
                 continue  # nobody can be subscribed to it yet
-            ch.log(o.payload, log_time=o.t_ns)
-            self.sent += 1
-            self.bytes += len(o.payload)
+            self._log(cid, o.payload, o.t_ns)
 
     def _send_transforms(self) -> None:
         tf = self.mapping.transforms(time.time_ns())
@@ -368,6 +518,16 @@ class FoxgloveLive:
         self._arm()
 
     def health(self) -> dict[str, Any]:
+        """The hub's counters, and the relay's (its guard's, every ``TICK_S``: ``clients``, ``closedSlow``...;
+        ``relaySent``: messages it logged to the SDK). ``notSent``: refused past ``RELAY_BYTES``."""
+        relay = dict(self._relay_health)
+        relay["relaySent"] = relay.pop("sent", 0)
+        relay.pop("bytes", None)
+        outbox = self._outbox
         return {"url": self.url, "channels": len(self.channels),
                 "subscriptions": sum(self.subscribers.values()), "sent": self.sent, "errors": self.errors,
-                **(self.guard.health() if self.guard is not None else {})}
+                "queuedBytes": outbox.bytes if outbox is not None else 0,
+                "notSent": outbox.refused if outbox is not None else 0,
+                "relayPid": self.relay.pid if self.relay is not None else None,
+                "clients": 0, "closedSlow": 0, "closedOverLimit": 0, "closedInvalid": 0, "invalidMessages": 0,
+                **relay}

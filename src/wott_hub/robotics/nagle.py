@@ -42,12 +42,12 @@ def tcp_sockets(port: int, state: str) -> dict[str, list[str]]:
     return found
 
 
-def descriptors_of(inodes: set[str] | dict[str, list[str]]) -> list[int]:
-    """This process's descriptors of the sockets with these inodes."""
+def descriptors_of(inodes: set[str] | dict[str, list[str]], pid: int | str = "self") -> list[int]:
+    """This process's (or process ``pid``'s) descriptors of the sockets with these inodes."""
     found = []
-    for fd in os.listdir("/proc/self/fd") if inodes else ():
+    for fd in os.listdir(f"/proc/{pid}/fd") if inodes else ():
         try:
-            target = os.readlink(f"/proc/self/fd/{fd}")
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
         except OSError:  # closed since listed
             continue
         if target.startswith("socket:[") and target[8:-1] in inodes:
@@ -55,9 +55,10 @@ def descriptors_of(inodes: set[str] | dict[str, list[str]]) -> list[int]:
     return found
 
 
-def descriptors(port: int, state: str = LISTEN) -> list[int]:
-    """This process's descriptors of TCP sockets on local ``port`` in ``state``."""
-    return descriptors_of(tcp_sockets(port, state))
+def descriptors(port: int, state: str = LISTEN, pid: int | str = "self") -> list[int]:
+    """This process's (or process ``pid``'s) descriptors of TCP sockets on local ``port`` in ``state``
+    (the sockets of the network namespace's table: the Foxglove relay's, seen from the hub)."""
+    return descriptors_of(tcp_sockets(port, state), pid)
 
 
 def disable_nagle(port: int) -> int:
