@@ -17,9 +17,9 @@ Contract (docs/robotics.md):
 - the hub is never slowed or stopped by a client: the SDK runs in a process of its own
   (``relay.py``: its ``Channel.log`` copies a message once per client holding the GIL, which in the
   hub's process every device's pipeline waited for). The hub encodes each message once and writes it
-  once to the relay's socket (``_Outbox``: one ``sendmsg`` on the loop; what the socket does not take
-  waits, bounded in bytes, ``RELAY_BYTES``; beyond, a message is not sent and counted), whatever the
-  number of viewers. There each client has
+  once to the relay's socket (``relay_link``: one ``sendmsg`` on the loop; what the socket does not
+  take waits, bounded in bytes, ``RELAY_BYTES``; beyond, a message is not sent and counted), whatever
+  the number of viewers. There each client has
   its own queue (``backlog`` messages; a slow client loses its oldest, alone), and
   ``guard.FoxgloveGuard`` bounds it in bytes: a client that stops reading is cut, so are clients
   beyond ``MAX_CLIENTS`` and one that sends invalid messages (whose log lines are sampled);
@@ -37,12 +37,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import socket
 import subprocess
-import sys
-import threading
 import time
-from collections import deque
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
@@ -50,10 +46,10 @@ from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record
 
 from . import relay_wire as W
 from .channel import Channel, Out
-from .guard import CLIENT_MAX_BYTES
 from .mapping import CONTACTS, LOG_EVENTS, FleetMapping
 from .names import TF_TOPIC
 from .raw_signals import DISPLACEMENT_EVENT, ImageFrame, TaxelGrid
+from .relay_link import RELAY_BYTES, RelayLink
 
 if TYPE_CHECKING:
     from wott_hub.events.plane import EventPlane
@@ -67,96 +63,6 @@ log = logging.getLogger("wott_hub.foxglove")
 
 STATIC_MIN_S = 1.0
 """A topic's static data (a mesh, ``/tf``) is sent at most this often, however many subscribe."""
-RELAY_BYTES = CLIENT_MAX_BYTES
-"""What waits for the relay's socket at most (the relay fell behind: a loaded machine); beyond, a
-message is not sent to the viewers, and counted (``notSent``): the sensors never wait for it."""
-START_S = 30.0  # the relay's server bound, at most (a Python start and the SDK's import: ~0.5 s)
-STOP_S = 5.0  # the relay's end after STOP, at most; then it is killed
-
-
-class _Outbox:
-    """Frames for the relay, written on the hub's loop to a non-blocking socket: a message costs the loop
-    one ``sendmsg`` (the kernel copies it once), whatever the number of viewers. What the socket does not
-    take waits here and goes when it is writable (``add_writer``), bounded in bytes: a ``LOG`` frame
-    that would take it past ``RELAY_BYTES`` is refused and counted; control frames always go. (A thread
-    writing a blocking socket cost more: every message woke it, and each wake-up took the GIL from the
-    devices' pipelines on a busy machine.)"""
-
-    def __init__(self, sock: socket.socket, loop: asyncio.AbstractEventLoop) -> None:
-        sock.setblocking(False)
-        self.sock = sock
-        self.loop = loop
-        self.pending: deque[bytes | memoryview] = deque()
-        self.bytes = 0  # pending
-        self.refused = 0
-        self.failed = ""
-
-    def put(self, frame: tuple[bytes, bytes], *, droppable: bool = True) -> bool:
-        head, body = frame
-        if self.failed:
-            return False
-        total = len(head) + len(body)
-        if self.pending:  # behind what waits: in order, or not at all
-            if droppable and self.bytes + total > RELAY_BYTES:
-                self.refused += 1
-                return False
-            self.pending += (head, body)
-            self.bytes += total
-            return True
-        try:
-            sent = self.sock.sendmsg([head, body])
-        except BlockingIOError:
-            sent = 0
-        except OSError as e:  # the relay is gone: the reader says so
-            self.failed = str(e)
-            return False
-        if sent == total:
-            return True
-        if sent < len(head):  # a frame begun is finished whatever the bound
-            self.pending += (memoryview(head)[sent:], body)
-        else:
-            self.pending.append(memoryview(body)[sent - len(head):])
-        self.bytes += total - sent
-        self.loop.add_writer(self.sock.fileno(), self._flush)
-        return True
-
-    def _flush(self) -> None:
-        pending = self.pending
-        while pending:
-            try:
-                sent = self.sock.sendmsg([pending[i] for i in range(min(len(pending), 64))])
-            except BlockingIOError:
-                return
-            except OSError as e:
-                self.failed = str(e)
-                pending.clear()
-                self.bytes = 0
-                break
-            self.bytes -= sent
-            while sent:
-                n = len(pending[0])
-                if sent >= n:
-                    pending.popleft()
-                    sent -= n
-                else:
-                    pending[0] = memoryview(pending[0])[sent:]
-                    sent = 0
-        self.loop.remove_writer(self.sock.fileno())
-
-    def close(self, timeout: float) -> None:
-        """What waits, written within ``timeout`` (the hub stops: the loop no longer writes it)."""
-        if self.pending:
-            self.loop.remove_writer(self.sock.fileno())
-        if self.failed:
-            return
-        self.sock.settimeout(timeout)
-        try:
-            for part in self.pending:
-                self.sock.sendall(part)
-        except OSError as e:
-            self.failed = str(e)
-        self.pending.clear()
-        self.bytes = 0
 
 
 class _Tap:
@@ -184,12 +90,7 @@ class FoxgloveLive:
         self.name = name
         self.tls = tls
         self.mapping = FleetMapping("foxglove", scene_hz=cfg.scene_hz, color_max_mm=cfg.color_max_mm)
-        self.relay: subprocess.Popen[bytes] | None = None
-        self._socks: list[socket.socket] = []
-        self._outbox: _Outbox | None = None
-        self._port: int | None = None
-        self._relay_health: dict[str, Any] = {}
-        self._stopping = False
+        self.link: RelayLink | None = None
         self._next_id = 0
         self.channels: dict[str, int] = {}  # topic -> its id with the relay
         self.owner: dict[str, str] = {}  # topic -> its Thing ("" for /tf)
@@ -210,113 +111,35 @@ class FoxgloveLive:
     def start(self) -> None:
         """Start the relay process and its server (the port is known after this: ``port``)."""
         self._loop = asyncio.get_running_loop()
-        # two socket pairs: the hub writes "down" without blocking (its loop), reads "up" in a thread
-        down, down_theirs = socket.socketpair()
-        up, up_theirs = socket.socketpair()
-        fds = (down_theirs.fileno(), up_theirs.fileno())
-        self.relay = subprocess.Popen([sys.executable, "-m", "wott_hub.robotics.relay", *map(str, fds)],
-                                      pass_fds=fds, stdin=subprocess.DEVNULL)
-        down_theirs.close()
-        up_theirs.close()
-        self._socks = [down, up]
-        W.send(down, W.control(W.INIT, {
-            "name": self.name, "host": self.cfg.host, "port": self.cfg.port, "backlog": self.cfg.backlog,
-            "tls": self.tls, "level": logging.getLogger("wott_hub").getEffectiveLevel()}))
-        up.settimeout(START_S)
-        try:
-            ready = self._ready(up)
-        except (OSError, TimeoutError) as e:
-            ready = {"error": f"the relay process did not start: {e}"}
-        up.settimeout(None)
-        if "error" in ready:
-            import errno
-
-            self._end_relay()
-            text = ready["error"]
-            code = errno.EADDRINUSE if "in use" in text else errno.EADDRNOTAVAIL
-            raise OSError(code, f"the Foxglove endpoint on {self.cfg.host}:{self.cfg.port}: {text} "
-                                "(choose another with --foxglove-port or [foxglove] port)")
-        self._port = int(ready["port"])
-        if not ready["nagle"]:
-            log.warning("Foxglove: the listener on port %s was not found to turn Nagle's algorithm off "
-                        "(not Linux?): messages may wait up to 40 ms for the client's ACK", self._port)
-        self._outbox = _Outbox(down, self._loop)
-        threading.Thread(target=self._read, args=(up,), name="foxglove-relay", daemon=True).start()
+        self.link = RelayLink(self._loop, self.subscribed, self._relay_ended)
+        self.link.start({"name": self.name, "host": self.cfg.host, "port": self.cfg.port,
+                         "backlog": self.cfg.backlog, "tls": self.tls,
+                         "level": logging.getLogger("wott_hub").getEffectiveLevel()},
+                        f"the Foxglove endpoint on {self.cfg.host}:{self.cfg.port}",
+                        "(choose another with --foxglove-port or [foxglove] port)")
         self._channel(self._tf_channel(), "")
 
-    @staticmethod
-    def _ready(sock: socket.socket) -> dict[str, Any]:
-        """The relay's ``READY`` (its log lines before it are written as they come)."""
-        while True:
-            frame = W.recv(sock)
-            if frame is None:
-                return {"error": "the relay process ended before its server started"}
-            kind, body = frame
-            if kind == W.READY:
-                return dict(body)
-            if kind == W.LOGREC:
-                level, name, text = body
-                logging.getLogger(name).log(level, "%s", text)
-
-    def _read(self, sock: socket.socket) -> None:
-        """The relay's frames (a thread): subscriptions to the hub's loop, health kept, log lines written."""
-        while True:
-            try:
-                frame = W.recv(sock)
-            except OSError:
-                frame = None
-            if frame is None:
-                self.call_soon(self._relay_ended)
-                return
-            kind, body = frame
-            if kind == W.SUB:
-                self.call_soon(self.subscribed, *body)
-            elif kind == W.HEALTH:
-                self._relay_health = body
-            elif kind == W.LOGREC:
-                level, name, text = body
-                logging.getLogger(name).log(level, "%s", text)
-
     def _relay_ended(self) -> None:
-        if self._stopping:
-            return
-        code = self.relay.poll() if self.relay is not None else None
-        log.error("Foxglove: the relay process ended (exit code %s): the endpoint is down until the hub "
-                  "restarts", code)
-        self._relay_health = {**self._relay_health, "relay": "ended"}
         self.subscribers.clear()
         self.active.clear()
 
     def stop(self) -> None:
-        self._stopping = True
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
-        if self._outbox is not None:
-            self._outbox.put(W.control(W.STOP, None), droppable=False)
-            self._outbox.close(STOP_S)
-            self._outbox = None
-        self._end_relay()
+        if self.link is not None:
+            self.link.stop()
         self.channels.clear()
         self.owner.clear()
-        self._port = None
 
-    def _end_relay(self) -> None:
-        relay, self.relay = self.relay, None
-        if relay is not None:
-            try:
-                relay.wait(STOP_S)
-            except subprocess.TimeoutExpired:
-                log.warning("Foxglove: the relay process did not end in %.0f s; killed", STOP_S)
-                relay.kill()
-                relay.wait(STOP_S)
-        for sock in self._socks:
-            sock.close()
-        self._socks = []
+    @property
+    def relay(self) -> subprocess.Popen[bytes] | None:
+        """The relay process (None before ``start`` and after ``stop``)."""
+        return self.link.process if self.link is not None else None
 
     @property
     def port(self) -> int | None:
-        return self._port
+        return self.link.port if self.link is not None else None
 
     @property
     def url(self) -> str | None:
@@ -324,11 +147,6 @@ class FoxgloveLive:
             return None
         host = self.cfg.host if self.cfg.host not in ("0.0.0.0", "::") else "127.0.0.1"
         return f"{'wss' if self.tls else 'ws'}://{host}:{self.port}"
-
-    def call_soon(self, fn: Any, *args: Any) -> None:
-        loop = self._loop
-        if loop is not None and not loop.is_closed():
-            loop.call_soon_threadsafe(fn, *args)
 
     # --- following the served Things ------------------------------------------------------------
 
@@ -353,8 +171,8 @@ class FoxgloveLive:
         self._meshes.pop(served.id, None)
         for topic in [t for t, owner in self.owner.items() if owner == served.id]:
             cid = self.channels.pop(topic)
-            if self._outbox is not None:
-                self._outbox.put(W.control(W.CLOSE, cid), droppable=False)
+            if self.link is not None:
+                self.link.put(W.control(W.CLOSE, cid), droppable=False)
             del self.owner[topic]
             self.subscribers.pop(topic, None)
         self.active.pop(served.id, None)
@@ -393,16 +211,16 @@ class FoxgloveLive:
             self._next_id += 1
             found = self.channels[ch.topic] = self._next_id
             self.owner[ch.topic] = owner
-            if self._outbox is not None:
-                self._outbox.put(W.control(W.CHANNEL, (
+            if self.link is not None:
+                self.link.put(W.control(W.CHANNEL, (
                     found, ch.topic, ch.schema_name, ch.schema_encoding, ch.schema, ch.encoding,
                     dict(ch.metadata))), droppable=False)
         return found
 
     def _log(self, cid: int, payload: bytes, t_ns: int) -> None:
         """One message to the relay, once, whatever the number of viewers (they are the relay's)."""
-        outbox = self._outbox
-        if outbox is not None and outbox.put(W.log_frame(cid, t_ns, payload)):
+        link = self.link
+        if link is not None and link.put(W.log_frame(cid, t_ns, payload)):
             self.sent += 1
             self.bytes += len(payload)
 
@@ -520,10 +338,11 @@ class FoxgloveLive:
     def health(self) -> dict[str, Any]:
         """The hub's counters, and the relay's (its guard's, every ``TICK_S``: ``clients``, ``closedSlow``...;
         ``relaySent``: messages it logged to the SDK). ``notSent``: refused past ``RELAY_BYTES``."""
-        relay = dict(self._relay_health)
+        link = self.link
+        relay = dict(link.health) if link is not None else {}
         relay["relaySent"] = relay.pop("sent", 0)
         relay.pop("bytes", None)
-        outbox = self._outbox
+        outbox = link.outbox if link is not None else None
         return {"url": self.url, "channels": len(self.channels),
                 "subscriptions": sum(self.subscribers.values()), "sent": self.sent, "errors": self.errors,
                 "queuedBytes": outbox.bytes if outbox is not None else 0,
