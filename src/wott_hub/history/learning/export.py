@@ -8,8 +8,10 @@ device, an episode shorter than two frames (lerobot's stats need two), a range w
 
 Episodes: those given (``--episodes``), else those marked in history within the range
 (``episodes.marked``), else the range itself (from the first record of the Things in it to the last)
-as one episode of ``task``. Each episode is resampled (``resample.py``) a block of ``BLOCK`` frames at a
-time and handed to the format's writer (``lerobot.py``, ``replay_buffer.py``).
+as one episode of ``task``. Each episode is resampled (``resample.py``) a block of ``BLOCK`` frames (and at
+most ``BLOCK_S`` seconds) at a time and handed to the format's writer (``lerobot.py``,
+``replay_buffer.py``). A block's memory is then the same at any length and any fps: its values, and
+the records it holds (a camera's images of ``BLOCK_S`` seconds at most, ~20 MB at 1 image/s).
 """
 
 from __future__ import annotations
@@ -36,12 +38,23 @@ if TYPE_CHECKING:
     from ..storage import StorageReader
     from .resample import Held
 
-__all__ = ["BLOCK", "FORMATS", "MAX_FPS", "DatasetRequest", "DatasetSummary", "export_dataset", "frames_of"]
+__all__ = [
+    "BLOCK",
+    "BLOCK_S",
+    "FORMATS",
+    "MAX_FPS",
+    "DatasetRequest",
+    "DatasetSummary",
+    "export_dataset",
+    "frames_of",
+]
 
 FORMATS = ("lerobot", "zarr")
 MAX_FPS = 1000
 """Frames per second at most: above it a frame is closer than most devices' own sample period."""
 BLOCK = 1024
+BLOCK_S = 35
+"""Seconds of an episode a block holds at most (1024 frames at 30 fps: 34 s)."""
 
 Progress = Callable[[int, int], None]
 """Called after each block with the frames done and the frames in all."""
@@ -237,8 +250,9 @@ def _episode(
 ) -> int:
     readers = [ThingReader(reader, t.thing, t.sources, episode.start_ns, episode.end_ns) for t in p.things]
     task = writer.task_index(episode.task)
-    for k0 in range(0, n, BLOCK):
-        k1 = min(n, k0 + BLOCK)
+    block = max(1, min(BLOCK, BLOCK_S * fps))
+    for k0 in range(0, n, block):
+        k1 = min(n, k0 + block)
         times = frame_times(episode.start_ns, fps, k0, k1)
         values: dict[str, np.ndarray] = {}
         images: list[Held] = []

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wott_hub.errors import InvalidInput
-from wott_hub.robotics.payloads import contacts, skin_packet
+from wott_hub.robotics.payloads import contacts, load_json, skin_packet
 from wott_hub.robotics.raw_signals import DISPLACEMENT_EVENT, displacement
 from wott_hub.td.raw import PRESSURE_GRID_RECORDED, RAW_IMAGE_RECORDED
 
@@ -332,9 +332,9 @@ class CameraSource(Source):
 
         h, w, _ = self.features[0].shape
         try:
-            png = base64.b64decode(json.loads(rec.data)["image"])
-            with Image.open(io.BytesIO(png)) as img:
-                rgb = np.asarray(img.convert("RGB"))
+            png = base64.b64decode(load_json(rec.data)["image"])
+            with Image.open(io.BytesIO(png)) as img:  # an RGB image as it is: no converted copy
+                rgb = np.asarray(img if img.mode == "RGB" else img.convert("RGB"))
         except (ValueError, KeyError, TypeError, UnidentifiedImageError, OSError) as e:
             raise InvalidInput(
                 f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})"

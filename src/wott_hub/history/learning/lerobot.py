@@ -7,9 +7,10 @@ Layout (lerobot v0.6.1, what every release from 0.4 to 0.6 reads)::
     videos/<key>/chunk-XXX/file-XXX.mp4        per camera, many episodes a file (video.py)
     README.md                                  the dataset card (card.py)
 
-An episode's rows go straight to the data file; its stats' first pass runs on each block and spills
-the values (``work/*.spill``), read back once at the episode's end for the second pass
-(``stats.FeatureStats``: the histogram needs the episode's min and max). Memory holds a block of
+An episode's rows go straight to the data file (written in a thread of its own, ``behind.py``); its
+stats' first pass runs on each block and spills the values (``work/*.spill``), read back once at the
+episode's end for the second pass (``stats.FeatureStats``: the histogram needs the episode's min and
+max). Memory holds a block of
 frames, never an episode. Rows: ``index`` counts frames over the dataset,
 ``frame_index`` within the episode, ``timestamp`` is ``frame_index / fps``; tasks are numbered in the
 order they first appear.
@@ -23,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .behind import WriterBehind
 from .lerobot_files import (
     CHUNKS_SIZE,
     CODEBASE_VERSION,
@@ -39,8 +41,6 @@ from .stats import FeatureStats, aggregate
 from .video import VIDEO_FILE_MB
 
 if TYPE_CHECKING:
-    import pyarrow.parquet as pq
-
     from .features import Feature
     from .resample import Held
     from .video import CameraVideo
@@ -70,7 +70,7 @@ class LeRobotWriter:
         self.stats: dict[str, dict[str, np.ndarray]] | None = None
         self.frames = 0
         self.chunk, self.index = 0, 0
-        self._data: pq.ParquetWriter | None = None
+        self._data: WriterBehind | None = None
         self._data_frames = 0
         self._work = root / "work"  # the stats' spill files
         self._stats: dict[str, FeatureStats] = {}
@@ -107,9 +107,7 @@ class LeRobotWriter:
         import pyarrow as pa
 
         assert self._data is not None
-        self._data.write_table(
-            pa.table([arrow_array(f, values[f.key]) for f in self.columns], schema=self.schema)
-        )
+        self._data.write(pa.table([arrow_array(f, values[f.key]) for f in self.columns], schema=self.schema))
         for f in self.columns:
             self._stats[f.key].first(values[f.key])
         for cam, held in zip(self.cameras, images, strict=True):
@@ -137,6 +135,7 @@ class LeRobotWriter:
 
         path = self.root / data_path(self.chunk, self.index)
         if self._data is not None:
+            self._data.flush()
             size = path.stat().st_size / 2**20
             if size + size / max(self._data_frames, 1) * frames < DATA_FILE_MB:
                 return
@@ -147,7 +146,9 @@ class LeRobotWriter:
             path = self.root / data_path(self.chunk, self.index)
             self._data_frames = 0
         path.parent.mkdir(parents=True, exist_ok=True)
-        self._data = pq.ParquetWriter(path, self.schema, compression="snappy", use_dictionary=False)
+        self._data = WriterBehind(
+            pq.ParquetWriter(path, self.schema, compression="snappy", use_dictionary=False)
+        )
 
     # --- the end ------------------------------------------------------------------------------
 
@@ -202,7 +203,8 @@ class LeRobotWriter:
     def abort(self) -> None:
         """Close what is open (the folder is removed by the caller)."""
         if self._data is not None:
-            self._data.close()
+            self._data.close(check=False)
+            self._data = None
         for st in self._stats.values():
             st.close()
         for cam in self.cameras:

@@ -8,9 +8,14 @@ none (index -1, age -1). The sample held when an episode starts is looked up bef
 
 Streams are read once per Thing (``ThingReader``: its records of the episode in seq order, handed to
 each stream by ``Stream.accepts``) a block of frames at a time, so memory holds a block and a page, not
-an episode. Within a Thing seq order is time order except for records published after later ones (a
-camera image, published once encoded, ~100 ms late): a block is held only once the Thing's pages have
-reached ``LATE_NS`` past its last frame, and each stream's samples are put in time order first.
+an episode. A page is bounded in bytes as well as in records (``PAGE_BYTES``): a stream of large
+records (camera images, ~0.5 MB each) is read in pages of its own, a few dozen records each, the
+small ones together 20,000 at a time. (One page of 20,000 records of a camera's Thing was ~120 MB of
+images, three copies of it in memory while SQLite joined it and the next one was read ahead: the
+export's peak memory.) Within a Thing seq order is time order except for records published after
+later ones (a camera image, published once encoded, ~100 ms late): a block is held only once each
+of the Thing's page streams has reached ``LATE_NS`` past its last frame, and each stream's samples
+are put in time order first.
 """
 
 from __future__ import annotations
@@ -25,10 +30,12 @@ if TYPE_CHECKING:
 
     from ..storage import StorageReader
 
-__all__ = ["LATE_NS", "Held", "Stream", "ThingReader", "frame_times"]
+__all__ = ["LATE_NS", "PAGE_BYTES", "Held", "Stream", "ThingReader", "frame_times", "page_groups"]
 
 LATE_NS = 2_000_000_000
 """How far past a block's last frame a Thing's records are read before the block is held."""
+PAGE_BYTES = 8 << 20
+"""About the payload bytes a page holds at most (a page is read ahead while the one before is used)."""
 _TIME_NS = 10**9
 
 
@@ -82,6 +89,24 @@ class _Samples:
         return Held(samples, index, age)
 
 
+def page_groups(sizes: dict[str, int], page: int) -> list[tuple[list[str], int]]:
+    """The names read together and their page (records): those of records no larger than
+    ``PAGE_BYTES / page`` together in pages of ``page``, each other one alone in pages of
+    ``PAGE_BYTES`` (at least 4 records). ``sizes``: a record's typical payload length per name."""
+    small = sorted(n for n, size in sizes.items() if size * page <= PAGE_BYTES)
+    large = sorted(n for n in sizes if n not in small)
+    groups = [(small, page)] if small else []
+    return groups + [([n], max(4, min(page, PAGE_BYTES // max(sizes[n], 1)))) for n in large]
+
+
+class _Pages:
+    """Pages of some of a Thing's streams, and the time the last one read reached."""
+
+    def __init__(self, pages: Iterator[list[Record]], start_ns: int) -> None:
+        self.pages: Iterator[list[Record]] | None = pages
+        self.reached = start_ns
+
+
 class ThingReader:
     """One Thing's records in [start_ns, end_ns], read once, held block by block for each stream."""
 
@@ -98,29 +123,38 @@ class ThingReader:
         names = sorted({s.name for s in self.streams})
         self._by_name: dict[str, list[tuple[Stream, _Samples]]] = {}
         self._samples: dict[int, _Samples] = {}
+        sizes: dict[str, int] = {}
         for s in self.streams:
-            before = next((r for r in reader.last_at(thing, s.name, start_ns, limit=8) if s.accepts(r)), None)
+            last = reader.last_at(thing, s.name, start_ns, limit=8)
+            before = next((r for r in last if s.accepts(r)), None)
             samples = self._samples[id(s)] = _Samples(before)
             self._by_name.setdefault(s.name, []).append((s, samples))
-        self._pages: Iterator[list[Record]] | None = (
-            reader.pages(thing, start_ns + 1, end_ns, names, page) if names and end_ns > start_ns else None
+            last = last or reader.last_at(thing, s.name, end_ns)
+            sizes[s.name] = max([sizes.get(s.name, 0), *(len(r.data) for r in last)])
+        self._groups = (
+            [
+                _Pages(reader.pages(thing, start_ns + 1, end_ns, group, size), start_ns)
+                for group, size in page_groups({n: sizes[n] for n in names}, page)
+            ]
+            if names and end_ns > start_ns
+            else []
         )
-        self._reached = start_ns
         self.records = 0
 
     def _read_until(self, t_ns: int) -> None:
-        while self._pages is not None and self._reached < t_ns:
-            page = next(self._pages, None)
-            if page is None:
-                self._pages = None
-                return
-            self.records += len(page)
-            by_name = self._by_name
-            for rec in page:
-                for stream, samples in by_name.get(rec.name, ()):
-                    if stream.accepts(rec):
-                        samples.waiting.append(rec)
-            self._reached = max(self._reached, page[-1].t_ns)
+        by_name = self._by_name
+        for group in self._groups:
+            while group.pages is not None and group.reached < t_ns:
+                page = next(group.pages, None)
+                if page is None:
+                    group.pages = None
+                    break
+                self.records += len(page)
+                for rec in page:
+                    for stream, samples in by_name.get(rec.name, ()):
+                        if stream.accepts(rec):
+                            samples.waiting.append(rec)
+                group.reached = max(group.reached, page[-1].t_ns)
 
     def hold(self, times: np.ndarray) -> list[Held]:
         """Each stream's block at ``times`` (ascending), in the order of ``streams``."""

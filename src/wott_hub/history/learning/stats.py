@@ -163,7 +163,7 @@ class FeatureStats:
         step = np.where(step > 0, step, 1)
         counts = np.zeros(w * BINS, np.int64)
         with self.paths[0].open("rb") as fc, self.paths[1].open("rb") as fv:
-            while len(cols := np.fromfile(fc, np.int32, 1 << 22)):
+            while len(cols := np.fromfile(fc, np.int32, 1 << 20)):
                 vals = np.fromfile(fv, self.work, len(cols))
                 b = np.clip(((vals - first[cols]) / step[cols]).astype(np.int64), 0, BINS - 1)
                 for _ in range(2):  # the arithmetic is off by one bin at most, next to an edge

@@ -166,7 +166,7 @@ class CameraVideo:
         self._frame = 0
         self._gop: list[tuple[int, Any]] = []
         self._first_gop = True
-        self._queue: queue.Queue[Held | None] = queue.Queue(maxsize=2)
+        self._queue: queue.Queue[Held | None] = queue.Queue(maxsize=1)
         self._worker: threading.Thread | None = None
         self._error: BaseException | None = None
 
@@ -223,7 +223,7 @@ class CameraVideo:
     def write(self, held: Held) -> None:
         """The block's frames, each the image held then: decoded, converted and encoded in a thread of
         the camera's own (PNG decoding and x264 let the GIL go: the export's other work goes on), at most
-        two blocks behind."""
+        one block behind (a block holds its images' records: ~20 MB at 1 image/s)."""
         if self._worker is None:
             self._worker = threading.Thread(target=self._work, name=f"video {self.key}", daemon=True)
             self._worker.start()
