@@ -182,16 +182,19 @@ def _writer(req: DatasetRequest, p: Plan, root: Path) -> DatasetWriter:
     from .video import CameraVideo, VideoSettings
 
     settings = VideoSettings(req.codec)
-    videos = [CameraVideo(cam, root, req.fps, settings) for cam in p.cameras()]
     if req.fmt == "lerobot":
         from .lerobot import LeRobotWriter
         from .lerobot_files import DEFAULT_FEATURES
+        from .video_process import VideoProcess
 
         defaults = [Feature(k, dtype, shape) for k, (dtype, shape) in DEFAULT_FEATURES.items()]
+        # each camera's video in a process of its own (video_process.py: the export's other core)
+        videos = [VideoProcess(cam, root, req.fps, settings) for cam in p.cameras()]
         return LeRobotWriter(root, req.fps, [*p.features(), *defaults], videos)
     from .replay_buffer import ReplayBufferWriter
 
-    return ReplayBufferWriter(root, p.features(), videos)
+    return ReplayBufferWriter(root, p.features(), [CameraVideo(cam, root, req.fps, settings)
+                                                   for cam in p.cameras()])
 
 
 def _write(

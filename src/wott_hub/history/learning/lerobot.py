@@ -19,6 +19,7 @@ order they first appear.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -44,6 +45,7 @@ if TYPE_CHECKING:
     from .features import Feature
     from .resample import Held
     from .video import CameraVideo
+    from .video_process import VideoProcess
 
 __all__ = ["LeRobotWriter"]
 
@@ -57,7 +59,7 @@ class LeRobotWriter:
         root: Path,
         fps: int,
         features: list[Feature],
-        cameras: list[CameraVideo],
+        cameras: Sequence[CameraVideo | VideoProcess],
         robot_type: str | None = None,
     ) -> None:
         self.root, self.fps, self.robot_type = root, fps, robot_type

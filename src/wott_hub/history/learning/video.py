@@ -234,7 +234,7 @@ class CameraVideo:
         while (held := self._queue.get()) is not None:
             try:
                 if self._error is None:
-                    self._write(held)
+                    self.write_now(held)
             except BaseException as e:  # raised in the export's thread at the next call
                 self._error = e
             finally:
@@ -245,7 +245,8 @@ class CameraVideo:
         if self._error is not None:
             raise self._error
 
-    def _write(self, held: Held) -> None:
+    def write_now(self, held: Held) -> None:
+        """``write``'s work, in the calling thread (its thread's, or ``video_process``'s child's)."""
         assert self.file is not None and self.stats is not None
         first = self._frame
         n = len(held.which)
