@@ -57,6 +57,10 @@ class FolderReader:
         return True
 
     def read(self) -> tuple[bool, np.ndarray | None]:
+        # the clock starts as the first read starts: its decoding (and cv2's first import) is the first
+        # frame's reading, not a delay of every frame after it (the hub stamps frames from the open)
+        if self.realtime and self._t0 is None:
+            self._t0 = time.monotonic()
         import cv2
 
         k = self.frames_read
@@ -69,10 +73,8 @@ class FolderReader:
             return False, None
         self.frames_read += 1
         self.t_s = k / self.fps
-        if self.realtime:
+        if self.realtime and self._t0 is not None:
             now = time.monotonic()
-            if self._t0 is None:
-                self._t0 = now
             due = self._t0 + self.t_s
             if due > now:
                 time.sleep(due - now)

@@ -75,6 +75,7 @@ class CameraReader:
         return isinstance(self.spec, str) and "://" not in self.spec
 
     def read(self) -> tuple[bool, np.ndarray | None]:
+        start = time.monotonic()  # the first frame's decoding is its reading, not every frame's delay
         ok, frame = self._cap.read()
         if not ok or frame is None:
             if self.is_file and self.frames_read:
@@ -90,7 +91,7 @@ class CameraReader:
             if self.realtime:
                 now = time.monotonic()
                 if self._t0 is None:
-                    self._t0 = now - self.t_s
+                    self._t0 = start - self.t_s
                 due = self._t0 + self.t_s
                 if due > now:
                     time.sleep(due - now)

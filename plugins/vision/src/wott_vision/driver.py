@@ -221,6 +221,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         self._wall0_ns = time.time_ns()
         self._mono0_ns = time.monotonic_ns()
         self._base_ns: int | None = None  # hub time of a recorded source's t_s = 0
+        self._rebase = False  # a recorded source just opened: ``_base_ns`` is set at its first read
         self._last_t_ns = 0
         self.below_threshold_s = 1.0  # 0: never report a press below epsilon
         self._below_since_ns: int | None = None
@@ -292,9 +293,8 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                 _release(reader)
                 raise _SourceLost(f"{self.source_name} is closed")
             self._reader = reader
-            if getattr(reader, "recorded", False):  # continue after the last frame, on the hub clock
-                self._base_ns = max(self._wall0_ns + time.monotonic_ns() - self._mono0_ns,
-                                    self._last_t_ns + 1_000_000)
+            if getattr(reader, "recorded", False):  # on the hub clock from its first read (``_step``)
+                self._base_ns, self._rebase = None, True
         if self.estimator.has_reference:
             self.estimator.reset_tracking()
 
@@ -310,7 +310,16 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             reader = self._reader
             if reader is None:
                 raise _SourceLost(f"{self.source_name} is closed")
+            start_ns = time.monotonic_ns()
             ok, images = reader.read()
+            if self._rebase and ok:
+                # a recording's t_s = 0 is when its first read began (the reader paces from there), on
+                # the hub clock, after the last frame of a previous read: not when it was opened (the
+                # loop may be busy between the two: the frames were stamped ~100 ms early)
+                t_s_ns = int(round(float(getattr(reader, "t_s", 0.0) or 0.0) * 1e9))
+                self._base_ns = max(self._wall0_ns + start_ns - self._mono0_ns,
+                                    self._last_t_ns + 1_000_000) - t_s_ns
+                self._rebase = False
             t_ns = self._timestamp(reader)
             truth = getattr(reader, "truth", None)
             truth_t_s = getattr(reader, "t_s", None) if truth is not None else None
