@@ -150,14 +150,18 @@ def sensor_cases() -> dict[str, tuple[np.ndarray, np.ndarray, float]]:
 
 
 def through_hub() -> str:
-    """The two sensors played at their rates by a real hub (``gel_latency``), as a table."""
-    with tempfile.TemporaryDirectory() as tmp:
-        folders = {}
-        for family, (rest, presses, fps) in sensor_cases().items():
-            device = "digit" if family == "digit" else "mini"
-            folders[device] = Path(tmp) / device
-            write_recording(folders[device], rest, np.concatenate([presses] * int(fps)))  # ~48 s each
-        rows = latency(folders)
+    """The two sensors played at their rates by a real hub (``gel_latency``), as a table: from recordings
+    of lossless PNGs, then of JPEGs (quality 95: both sensors stream MJPEG)."""
+    rows = []
+    for suffix, what in ((".png", "PNG"), (".jpg", "JPEG")):
+        with tempfile.TemporaryDirectory() as tmp:
+            folders = {}
+            for family, (rest, presses, fps) in sensor_cases().items():
+                device = "digit" if family == "digit" else "mini"
+                folders[device] = Path(tmp) / device
+                write_recording(folders[device], rest, np.concatenate([presses] * int(fps)),  # ~48 s each
+                                suffix=suffix)
+            rows += [[f"{what} recording: {row[0]}", *row[1:]] for row in latency(folders)]
     return markdown_table(["through a real hub (`wott-hub run`)", "events", "value", "period"], rows)
 
 

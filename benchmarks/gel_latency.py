@@ -9,8 +9,8 @@ event as it arrives (``time.time_ns``). The hub stamps each frame with the time 
 clock (a recording is read when its frame is due, a late read keeps the due time), stored with the
 event's sequence number in history: latency = arrival - due, both on this machine's clock. Frames
 read late count against the hub (the lateness is in the latency). The hub's CPU over the same window
-(``/proc/PID/stat``, its history process included) covers everything it does for the two sensors: PNG
-decode, processing, actions, history, SSE.
+(``/proc/PID/stat``, its history process included) covers everything it does for the two sensors:
+decoding, processing, actions, history, SSE.
 """
 
 from __future__ import annotations
@@ -117,6 +117,6 @@ def latency(recordings: dict[str, Path]) -> list[list[str]]:
                 rows.append([f"{d} at {RATES[d]:g} fps: frame due -> SSE event", f"{len(lat)}",
                              f"p50 {np.percentile(lat, 50):.1f} ms · p99 {np.percentile(lat, 99):.1f} ms",
                              f"{period:.1f} ms"])
-        rows.append(["the whole hub process over the same window (PNG decode, processing, actions, "
+        rows.append(["the whole hub process over the same window (decoding, processing, actions, "
                      "history, SSE)", "", f"{100 * cpu:.0f} % of one core", ""])
     return rows

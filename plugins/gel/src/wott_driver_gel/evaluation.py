@@ -45,9 +45,9 @@ def load_taxim(which: str = "gelsight_mini") -> PressSet:
 
 
 def write_recording(folder: Path, background: np.ndarray, presses: np.ndarray, *, rest: int = 5,
-                    between: int = 1) -> list[int]:
-    """The frames as numbered PNGs in ``folder``: ``rest`` backgrounds, then each press and ``between``
-    backgrounds. Returns the frame index of each press."""
+                    between: int = 1, suffix: str = ".png") -> list[int]:
+    """The frames as numbered images in ``folder`` (PNG, or ``suffix``'s format: ``.jpg`` at quality 95):
+    ``rest`` backgrounds, then each press and ``between`` backgrounds. Returns each press's frame index."""
     import cv2
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -57,8 +57,9 @@ def write_recording(folder: Path, background: np.ndarray, presses: np.ndarray, *
         at.append(len(frames))
         frames.append(p)
         frames.extend([background] * between)
+    params = [cv2.IMWRITE_JPEG_QUALITY, 95] if suffix == ".jpg" else []
     for k, f in enumerate(frames):
-        cv2.imwrite(str(folder / f"{k:05d}.png"), f)
+        cv2.imwrite(str(folder / f"{k:05d}{suffix}"), f, params)
     return at
 
 
