@@ -173,6 +173,15 @@ class _SourceEnded(Exception):
     """A finite simulated source played to its end: the device is done, not lost (``frames()`` ends)."""
 
 
+def _recorded_base(driver: CameraDriver, start_ns: int, reader: Any) -> int:
+    """The hub time of a recording's t_s = 0: when its first read began (``start_ns``, monotonic: the
+    reader paces from there), after the last frame of a previous read. Not when it was opened: the hub's
+    loop may be busy between the two (the frames of the device opened first were stamped ~100 ms early)."""
+    t_s_ns = int(round(float(getattr(reader, "t_s", 0.0) or 0.0) * 1e9))
+    read_ns = driver._wall0_ns + start_ns - driver._mono0_ns
+    return max(read_ns, driver._last_t_ns + 1_000_000) - t_s_ns
+
+
 class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavailableNodes, ServesRawSignals):
     """One camera-based skin: ``open_source()`` makes a reader, the estimator turns frames into D.
 
@@ -221,7 +230,6 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
         self._wall0_ns = time.time_ns()
         self._mono0_ns = time.monotonic_ns()
         self._base_ns: int | None = None  # hub time of a recorded source's t_s = 0
-        self._rebase = False  # a recorded source just opened: ``_base_ns`` is set at its first read
         self._last_t_ns = 0
         self.below_threshold_s = 1.0  # 0: never report a press below epsilon
         self._below_since_ns: int | None = None
@@ -293,8 +301,7 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
                 _release(reader)
                 raise _SourceLost(f"{self.source_name} is closed")
             self._reader = reader
-            if getattr(reader, "recorded", False):  # on the hub clock from its first read (``_step``)
-                self._base_ns, self._rebase = None, True
+            self._base_ns = None  # a recording's: set at its first read (``_step``)
         if self.estimator.has_reference:
             self.estimator.reset_tracking()
 
@@ -310,16 +317,9 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             reader = self._reader
             if reader is None:
                 raise _SourceLost(f"{self.source_name} is closed")
-            start_ns = time.monotonic_ns()
-            ok, images = reader.read()
-            if self._rebase and ok:
-                # a recording's t_s = 0 is when its first read began (the reader paces from there), on
-                # the hub clock, after the last frame of a previous read: not when it was opened (the
-                # loop may be busy between the two: the frames were stamped ~100 ms early)
-                t_s_ns = int(round(float(getattr(reader, "t_s", 0.0) or 0.0) * 1e9))
-                self._base_ns = max(self._wall0_ns + start_ns - self._mono0_ns,
-                                    self._last_t_ns + 1_000_000) - t_s_ns
-                self._rebase = False
+            start_ns, (ok, images) = time.monotonic_ns(), reader.read()
+            if ok and self._base_ns is None and getattr(reader, "recorded", False):
+                self._base_ns = _recorded_base(self, start_ns, reader)
             t_ns = self._timestamp(reader)
             truth = getattr(reader, "truth", None)
             truth_t_s = getattr(reader, "t_s", None) if truth is not None else None
