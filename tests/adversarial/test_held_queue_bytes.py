@@ -21,105 +21,34 @@ The tmpfs needs root (CI runs as root): without it the test fails naming it, it 
 
 from __future__ import annotations
 
-import signal
-import statistics
-import textwrap
-import time
-from pathlib import Path
-from typing import Any
-
-from . import surroundings as S
-from .test_writer_queue_bytes import DISK_MB, fill, history, hub_pid
+from .test_writer_queue_bytes import attack
 
 QUEUE_MB = 16
-REST_S = 4.0
 ATTACK_S = 60.0  # at most: the held queue reaches its budget within seconds at the camera's rate
 AFTER_SHED_S = 10.0  # sampled this long once held records are let go (the bound holding, not just reached)
-
-
-def config(folder: Path) -> Path:
-    cfg = folder / "hub.toml"
-    cfg.write_text(textwrap.dedent(f"""
-        [hub]
-        http_port = 0
-        ws_port = 0
-        database = "disk/hub.db"
-        history_queue_mb = {QUEUE_MB}
-        history_durability = "committed"
-        history_skip = ["pad"]
-        ring_size = 16
-
-        [[device]]
-        id = "cam"
-        family = "flat-vision"
-        source = "sim"
-        fps = 30.0
-        record_raw_hz = 30.0
-
-    """) + S.press_table("pad", 60.0))
-    return cfg
+COMMITTED = 'history_durability = "committed"\nhistory_skip = ["pad"]\n'
 
 
 def test_a_full_disk_in_committed_mode_keeps_the_held_queue_in_its_byte_budget(tmp_path, running_hub,
                                                                                  eventually):
-    with S.small_disk(tmp_path / "disk", f"{DISK_MB}m") as disk:
-        hub = running_hub(["-c", str(config(tmp_path))], tmp_path)
-        pad = None
-        try:
-            info = hub.ready(120)
-            url = info["hub"]
-            pid = hub_pid(hub.proc.pid)
-            eventually(lambda: history(url)["written"] > 30, 60, "records written at rest")
-            pad = S.GapMeter(info["devices"]["pad"] + "/events").start()
-            t_rest = time.monotonic()
-            rest = []
-            while time.monotonic() - t_rest < REST_S:
-                rest.append(S.rss_mb(pid))
-                time.sleep(0.25)
-            rest_rss = statistics.median(rest)
-            rest_pad_hz = pad.count(t_rest) / (time.monotonic() - t_rest)
-            fill(disk)
-
-            t0 = time.monotonic()
-            samples: list[tuple[float, float]] = []
-            healths: list[dict[str, Any]] = []
-            shed_at = None
-            while time.monotonic() - t0 < ATTACK_S:
-                samples.append((time.monotonic() - t0, S.rss_mb(pid)))
-                h = history(url)
-                healths.append(h)
-                if shed_at is None and h["held"]["notDelivered"] > 0:
-                    shed_at = time.monotonic()
-                if shed_at is not None and time.monotonic() - shed_at >= AFTER_SHED_S:
-                    break
-                time.sleep(0.25)
-            took = time.monotonic() - t0
-            pad_hz, pad_gap = pad.count(t0) / took, pad.longest_gap(t0)
-            pad.stop()
-            pad = None
-            t_stop = time.monotonic()
-            hub.signal(signal.SIGTERM)
-            rc = hub.wait(60)
-            stop_s = time.monotonic() - t_stop
-            log = hub.log()
-        finally:
-            if pad is not None:
-                pad.stop()
-            hub.kill()
-
+    m = attack(tmp_path, running_hub, eventually, QUEUE_MB, ATTACK_S, hub_lines=COMMITTED,
+               dropping=lambda h: h["held"]["notDelivered"] > 0, after_s=AFTER_SHED_S)
+    samples, healths, took, log = m["samples"], m["healths"], m["attack_s"], m["log"]
+    rest_rss, rest_pad_hz, pad_hz, pad_gap = m["rest_rss_mb"], m["rest_pad_hz"], m["pad_hz"], m["pad_gap_s"]
+    shed_after, rc, stop_s = m["dropped_after_s"], m["rc"], m["stop_s"]
     peak = max(rss for _, rss in samples)
     held = [h["held"] for h in healths]
     last = held[-1]
     print(f"committed, history_queue_mb {QUEUE_MB}: RSS rest {rest_rss:.0f} MB, peak {peak:.0f} MB, "
           f"last {samples[-1][1]:.0f} MB over {took:.1f} s; held records let go after "
-          f"{None if shed_at is None else round(shed_at - t0, 1)} s; held bytes max "
+          f"{None if shed_after is None else round(shed_after, 1)} s; held bytes max "
           f"{max(h['bytes'] for h in held) / 1e6:.1f} MB, notDelivered {last['notDelivered']}; "
           f"pad {rest_pad_hz:.1f} -> {pad_hz:.1f} events/s (longest gap {pad_gap:.2f} s); "
           f"stop {stop_s:.1f} s")
 
     # the disk really refused, and the held queue reached its bound: named in health and in the log
     assert healths[-1]["state"] == "degraded" and "full" in healths[-1]["lastError"], healths[-1]
-    assert shed_at is not None, f"no held record let go in {ATTACK_S} s of a full disk: {last}"
+    assert shed_after is not None, f"no held record let go in {ATTACK_S} s of a full disk: {last}"
     assert last["maxBytesPerThing"] == QUEUE_MB * 1_000_000, last
     assert all(h["bytes"] <= QUEUE_MB * 1_000_000 for h in held), max(h["bytes"] for h in held)
     assert "not delivered live" in log, log[-3000:]

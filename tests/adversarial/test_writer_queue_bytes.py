@@ -60,7 +60,8 @@ def hub_pid(uv_pid: int) -> int:
     return uv_pid
 
 
-def config(folder: Path, queue_mb: float) -> Path:
+def config(folder: Path, queue_mb: float, hub_lines: str = "") -> Path:
+    """The hub: a camera recording raw images, a pad; ``hub_lines``: more of ``[hub]``."""
     cfg = folder / "hub.toml"
     cfg.write_text(textwrap.dedent(f"""
         [hub]
@@ -69,7 +70,7 @@ def config(folder: Path, queue_mb: float) -> Path:
         database = "disk/hub.db"
         history_queue_mb = {queue_mb}
         ring_size = 16
-
+    """) + hub_lines + textwrap.dedent("""
         [[device]]
         id = "cam"
         family = "flat-vision"
@@ -86,12 +87,13 @@ def history(url: str) -> dict[str, Any]:
 
 
 def attack(folder: Path, running_hub: Any, eventually: Any, queue_mb: float,
-           attack_s: float = ATTACK_S, until_dropped: bool = True) -> dict[str, Any]:
-    """The scenario: at rest, then the disk full for ``attack_s`` at most (or until records have been
-    dropped for ``AFTER_DROP_S``); then SIGTERM. What was measured."""
+           attack_s: float = ATTACK_S, until_dropped: bool = True, *, hub_lines: str = "",
+           dropping: Any = lambda h: h["dropped"] > 0, after_s: float = AFTER_DROP_S) -> dict[str, Any]:
+    """The scenario: at rest, then the disk full for ``attack_s`` at most (or until ``dropping(health)``
+    has held for ``after_s``); then SIGTERM. What was measured. ``hub_lines``: see ``config``."""
     out: dict[str, Any] = {}
     with S.small_disk(folder / "disk", f"{DISK_MB}m") as disk:
-        hub = running_hub(["-c", str(config(folder, queue_mb))], folder)
+        hub = running_hub(["-c", str(config(folder, queue_mb, hub_lines))], folder)
         pad = None
         try:
             info = hub.ready(120)
@@ -117,9 +119,9 @@ def attack(folder: Path, running_hub: Any, eventually: Any, queue_mb: float,
                 samples.append((time.monotonic() - t0, rss))
                 h = history(url)
                 healths.append(h)
-                if until_dropped and dropped_at is None and h["dropped"] > 0:
+                if until_dropped and dropped_at is None and dropping(h):
                     dropped_at = time.monotonic()
-                if dropped_at is not None and time.monotonic() - dropped_at >= AFTER_DROP_S:
+                if dropped_at is not None and time.monotonic() - dropped_at >= after_s:
                     break
                 time.sleep(0.25)
             took = time.monotonic() - t0
