@@ -17,8 +17,6 @@ are black. Stats come from the images of the frames lerobot would sample (``stat
 
 from __future__ import annotations
 
-import queue
-import threading
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -166,9 +164,6 @@ class CameraVideo:
         self._frame = 0
         self._gop: list[tuple[int, Any]] = []
         self._first_gop = True
-        self._queue: queue.Queue[Held | None] = queue.Queue(maxsize=1)
-        self._worker: threading.Thread | None = None
-        self._error: BaseException | None = None
 
     def _next_file(self) -> None:
         if self.file is not None:
@@ -197,8 +192,6 @@ class CameraVideo:
         }
 
     def end(self) -> dict[str, Any]:
-        self._queue.join()
-        self._check()
         assert self.file is not None
         self._flush()
         return {f"videos/{self.key}/to_timestamp": self.file.frames / self.fps}
@@ -221,32 +214,8 @@ class CameraVideo:
         return self._image[1], self._image[2]
 
     def write(self, held: Held) -> None:
-        """The block's frames, each the image held then: decoded, converted and encoded in a thread of
-        the camera's own (PNG decoding and x264 let the GIL go: the export's other work goes on), at most
-        one block behind (a block holds its images' records: ~20 MB at 1 image/s)."""
-        if self._worker is None:
-            self._worker = threading.Thread(target=self._work, name=f"video {self.key}", daemon=True)
-            self._worker.start()
-        self._check()
-        self._queue.put(held)
-
-    def _work(self) -> None:
-        while (held := self._queue.get()) is not None:
-            try:
-                if self._error is None:
-                    self.write_now(held)
-            except BaseException as e:  # raised in the export's thread at the next call
-                self._error = e
-            finally:
-                self._queue.task_done()
-        self._queue.task_done()
-
-    def _check(self) -> None:
-        if self._error is not None:
-            raise self._error
-
-    def write_now(self, held: Held) -> None:
-        """``write``'s work, in the calling thread (its thread's, or ``video_process``'s child's)."""
+        """The block's frames, each the image held then: decoded, converted and encoded (in a process of
+        its own for an export: ``video_process``)."""
         assert self.file is not None and self.stats is not None
         first = self._frame
         n = len(held.which)
@@ -271,10 +240,6 @@ class CameraVideo:
             self._gop, self._first_gop = [], False
 
     def close(self) -> None:
-        if self._worker is not None:
-            self._queue.put(None)
-            self._worker.join()
-            self._worker = None
         if self.file is not None:
             self.file.close()
             self.file = None

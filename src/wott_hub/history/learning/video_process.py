@@ -146,7 +146,7 @@ def main() -> None:
             elif kind == "write":
                 assert video is not None
                 if failed is None:
-                    video.write_now(body)
+                    video.write(body)
                 continue
             elif failed is not None and kind != "close":
                 raise failed
