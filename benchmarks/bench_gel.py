@@ -10,8 +10,9 @@ of PNGs (the background 5 times, then each press followed by the background) and
 the background frames (phantoms), the centre error against the labels (mm), the spread of the
 estimated centres within each series (presses 0-12 and 13-23 press two fixed sites deeper and deeper:
 RMS distance from the series' mean, mm; the labels' own spread beside it), the radius against the
-label's (ratio). Held out, never tuned on: the older GelSight set of the same wheel (48 presses spread
-over its pad; its own params.json scale).
+label's (ratio). Held out: the older GelSight set of the same wheel (48 presses spread over its pad; its own
+params.json scale), never tuned on except for one criterion found on its frames (contacts that do not
+stand out from their surroundings, docs/gel.md), so it is no longer a blind test of that one.
 
 Cost (the coordinator runs it; not with ``--no-timing``): CPU per frame of the driver's processing on
 a Mini frame shaped to 320 x 240 from the real frames and on a 240 x 320 DIGIT frame (the real

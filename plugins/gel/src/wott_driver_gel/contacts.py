@@ -7,7 +7,14 @@ sharply); pixels above a threshold (``min_change`` grey levels, or ``noise_k`` t
 when that is larger: a noisy camera raises its own bar) form a mask, opened to drop specks;
 its connected components, the fragments of one contact joined (``join``: components whose gap is
 under ``join_k`` times the larger one's radius: a press whose change dips below the threshold across
-its rim splits into arcs), of at least ``min_area_mm2`` are contacts. A component's
+its rim splits into arcs), of at least ``min_area_mm2``, that stand out from the gel around them are
+contacts: a component's peak change is at least ``contrast_k`` times the change in a ring about it
+(1.5 to 2.5 of its radii out, its 90th percentile). A ball or
+a finger dents the gel locally: the ring around a real press barely changes (its peak is 13-90 times
+the ring's in Taxim's sets and the modelled DIGIT presses down to 0.05 mm deep; 4 for the faintest
+press the threshold still finds), while a change spread over the whole gel (the older GelSight set's
+frames carry streaks all over the pad, light changes the drift model leaves) passes the threshold in
+patches that are no stronger than their surroundings (1.3-2.2). A component's
 
 - **centre** is the centroid of the pixels inside it weighted by their change above the
   threshold: the colour change of a pressed gel is strongest on the slopes of the dent and
@@ -45,6 +52,7 @@ class ContactParams:
     drift_iters: int = 3
     join_k: float = 0.5
     peak_pct: float = 99.0  # the component's peak for ``radius_fraction``: this percentile of its change
+    contrast_k: float = 3.0  # its peak over the change around it (0: no such test)
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,6 +105,21 @@ def join(labels: np.ndarray, n: int, stats: np.ndarray, k: float) -> np.ndarray:
                 parent[root(j)] = root(i)
     lut: np.ndarray = np.array([root(i) for i in range(n)])
     return lut
+
+
+def surround(mag: np.ndarray, x: float, y: float, r: float) -> float:
+    """The change around a component centred at (``x``, ``y``) of radius ``r`` px: the 90th percentile over
+    the ring from 1.5 r to 2.5 r, sampled on a grid of about r/8 px (~1,500 pixels whatever the size); 0
+    where the ring is off the view. Another contact inside the ring counts as surroundings: two presses
+    closer than their radii (and not joined as one) can hide the weaker one (docs/gel.md)."""
+    h, w = mag.shape
+    step = max(1, int(r / 8))
+    y0, y1 = max(int(y - 2.5 * r), 0), min(int(y + 2.5 * r) + 1, h)
+    x0, x1 = max(int(x - 2.5 * r), 0), min(int(x + 2.5 * r) + 1, w)
+    yy, xx = np.mgrid[y0:y1:step, x0:x1:step]
+    d2 = (yy - y) ** 2 + (xx - x) ** 2
+    ring = mag[y0:y1:step, x0:x1:step][(d2 >= (1.5 * r) ** 2) & (d2 <= (2.5 * r) ** 2)]
+    return float(np.percentile(ring, 90)) if ring.size else 0.0
 
 
 def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, smoothed: bool = False,
@@ -163,6 +186,9 @@ def find_contacts(image: np.ndarray, ref: RestReference, p: ContactParams, *, sm
         wts = box[cy0:cy1, cx0:cx1][ys, xs].astype(np.float64)
         xs, ys = xs + (x0 + cx0), ys + (y0 + cy0)
         peak = float(wts.max())
+        if p.contrast_k > 0 and peak < p.contrast_k * surround(mag, float(xs.mean()), float(ys.mean()),
+                                                               float(np.sqrt(area / np.pi))):
+            continue
         above = wts - thr  # a pixel crossing the threshold enters with weight 0: no jump
         cx = float(xs @ above) / float(above.sum())
         cy = float(ys @ above) / float(above.sum())
