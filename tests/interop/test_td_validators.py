@@ -81,27 +81,55 @@ def served_tds(fleet, eventually) -> dict[str, dict[str, Any]]:
     return tds
 
 
+IRI_TERM_URL = "http://127.0.0.1:1/bad.jsonld"
+IRI_TERM = "iri-term"  # the name of test_an_iri_shaped_term_fails_both_processors's TD in the node run
+
+
 @pytest.fixture(scope="module")
-def playground(node_wot, served_tds, contexts, tmp_path_factory) -> dict[str, dict[str, Any]]:
-    """The playground's report of each TD (validate_tds.mjs), by where the TD was read. A TD served
-    the same (equal as JSON) at two places (a Thing's own URL and the directory, say) is validated
-    once and its report given to both: the validators are deterministic, and each TD costs them
-    ~0.5 s."""
+def iri_term(contexts, tmp_path_factory) -> tuple[dict[str, Any], Path]:
+    """What issue 34 found: a TD whose context has a unit term with a '/' (``mm/s`` as it was), and
+    that context's file (served at ``IRI_TERM_URL``)."""
+    bad = json.loads(Path(contexts[TD_V11]).read_text())  # any context will do: one more term
+    bad["@context"]["mm/s"] = "http://qudt.org/vocab/unit/MilliM-PER-SEC"
+    path = tmp_path_factory.mktemp("iri-term") / "bad.jsonld"
+    path.write_text(json.dumps(bad))
+    td = {"@context": [TD_V1, TD_V11, IRI_TERM_URL], "title": "t",
+          "securityDefinitions": {"n": {"scheme": "nosec"}}, "security": ["n"]}
+    return td, path
+
+
+@pytest.fixture(scope="module")
+def validated(node_wot, served_tds, contexts, iri_term, tmp_path_factory) -> dict[str, dict[str, Any]]:
+    """The playground's report of each TD (validate_tds.mjs) by its name: each served TD, and the TD of
+    ``iri_term`` last, under ``IRI_TERM``. One node process for all: its start and its validators'
+    loading are paid once (the reports of a TD do not depend on the others': the bad context is
+    requested by that TD alone, and it comes after the served ones). A TD served the same (equal as
+    JSON) at two places (a Thing's own URL and the directory, say) is validated once and its report
+    given to both: the validators are deterministic."""
     work = tmp_path_factory.mktemp("playground")
     first: dict[str, str] = {}  # the TD's text -> the first place it was read
     for where, td in served_tds.items():
         first.setdefault(json.dumps(td, sort_keys=True), where)
     unique = {where: served_tds[where] for where in first.values()}
+    bad_td, bad_context = iri_term
     (work / "input.json").write_text(json.dumps(
-        {"contexts": {url: str(path) for url, path in contexts.items()}, "tds": unique}))
+        {"contexts": {**{url: str(path) for url, path in contexts.items()}, IRI_TERM_URL: str(bad_context)},
+         "tds": {**unique, IRI_TERM: bad_td}}))
     done = subprocess.run([*node_wot, str(HERE / "validate_tds.mjs"), str(work / "input.json")], cwd=HERE,
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     lines = [json.loads(line) for line in done.stdout.splitlines() if line.strip()]
-    assert lines and lines[-1] == {"done": len(unique)}, done.stderr[-3000:]
+    assert lines and lines[-1] == {"done": len(unique) + 1}, done.stderr[-3000:]
     reports = {line["name"]: line for line in lines[:-1]}
-    return {where: {**reports[first[json.dumps(td, sort_keys=True)]], "name": where}
-            for where, td in served_tds.items()}
+    served = {where: {**reports[first[json.dumps(td, sort_keys=True)]], "name": where}
+              for where, td in served_tds.items()}
+    return {**served, IRI_TERM: reports[IRI_TERM]}
+
+
+@pytest.fixture(scope="module")
+def playground(validated) -> dict[str, dict[str, Any]]:
+    """The playground's report of each served TD, by where the TD was read."""
+    return {where: got for where, got in validated.items() if where != IRI_TERM}
 
 
 def test_the_playground_validates_every_served_td(served_tds, playground):
@@ -165,21 +193,12 @@ def test_the_loader_refuses_what_it_does_not_hold(contexts):
         jsonld.expand(td, {"documentLoader": _loader(contexts)})
 
 
-def test_an_iri_shaped_term_fails_both_processors(node_wot, contexts, tmp_path):
+def test_an_iri_shaped_term_fails_both_processors(contexts, iri_term, validated):
     """What issue 34 found: a unit term with a '/' (``mm/s`` as it was) is refused, so a vocabulary
-    change that breaks JSON-LD fails here (pyld) and in the playground's JSON-LD check."""
-    bad = json.loads(Path(contexts[TD_V11]).read_text())  # any context will do: one more term
-    bad["@context"]["mm/s"] = "http://qudt.org/vocab/unit/MilliM-PER-SEC"
-    (tmp_path / "bad.jsonld").write_text(json.dumps(bad))
-    url = "http://127.0.0.1:1/bad.jsonld"
-    td = {"@context": [TD_V1, TD_V11, url], "title": "t", "securityDefinitions": {"n": {"scheme": "nosec"}},
-          "security": ["n"]}
+    change that breaks JSON-LD fails here (pyld) and in the playground's JSON-LD check (its report
+    comes from the module's one node run, ``validated``)."""
+    td, bad_context = iri_term
     with pytest.raises(jsonld.JsonLdError):
-        jsonld.expand(td, {"documentLoader": _loader({**contexts, url: tmp_path / "bad.jsonld"})})
-    (tmp_path / "input.json").write_text(json.dumps({"contexts": {
-        TD_V1: str(contexts[TD_V1]), TD_V11: str(contexts[TD_V11]), url: str(tmp_path / "bad.jsonld")},
-        "tds": {"bad": td}}))
-    done = subprocess.run([*node_wot, str(HERE / "validate_tds.mjs"), str(tmp_path / "input.json")], cwd=HERE,
-                          capture_output=True, text=True, timeout=120)
-    got = json.loads(done.stdout.splitlines()[0])
+        jsonld.expand(td, {"documentLoader": _loader({**contexts, IRI_TERM_URL: bad_context})})
+    got = validated[IRI_TERM]
     assert got["report"]["jsonld"] == "failed" and any("term in form of IRI" in x for x in got["log"]), got

@@ -27,6 +27,27 @@ const corePath = require.resolve("@thing-description-playground/core");
 const fromCore = createRequire(corePath);
 const jsonld = fromCore("jsonld"); // the instance the core's tdValidator calls
 const core = require("@thing-description-playground/core");
+// The assertions package checks a TD against each of its assertion schemas through util.validate,
+// which builds a new Ajv and compiles the schema for every call: ~2 s of compiling per TD, the same
+// for every TD. The package's index and assertionTests-td.js take util.validate from the one module
+// instance when they load, so it is wrapped here first: the Ajv that util.validate builds for an
+// assertion schema (its own options, formats and vocabulary) is kept by the schema's text and used
+// again for the next TD. The verdicts are that Ajv's (validate, errors, errorsText), read before
+// the next call as the package does; only the compiling is not repeated.
+const assertionsDir = path.dirname(require.resolve("@thing-description-playground/assertions"));
+const assertionsUtil = require(path.join(assertionsDir, "util.js"));
+const buildAndValidate = assertionsUtil.validate;
+const built = new Map(); // the assertion schema's JSON text -> the Ajv util.validate built for it
+assertionsUtil.validate = (jsonData, schema, logFunc) => {
+  const key = JSON.stringify(schema);
+  const ajv = built.get(key);
+  if (ajv === undefined) {
+    const first = buildAndValidate(jsonData, schema, logFunc);
+    built.set(key, first.ajvObject);
+    return first;
+  }
+  return {valid: ajv.validate("assertion", jsonData), ajvObject: ajv};
+};
 const {tdAssertions} = require("@thing-description-playground/assertions");
 const Ajv = fromCore("ajv");
 const addFormats = fromCore("ajv-formats");
@@ -54,7 +75,6 @@ jsonld.documentLoader = async (url) => {
 
 // The assertions package reads its own files with our loader; it looks for the core's schema
 // under its own node_modules, where npm does not put it (the core is hoisted).
-const assertionsDir = path.dirname(require.resolve("@thing-description-playground/assertions"));
 const nestedCore = path.join(assertionsDir, "node_modules", "@thing-description-playground", "core");
 const coreDir = path.dirname(corePath);
 const fileLoader = (p) => fs.promises.readFile(p.startsWith(nestedCore) ? coreDir + p.slice(nestedCore.length) : p);
