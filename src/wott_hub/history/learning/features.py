@@ -36,6 +36,7 @@ from wott_hub.robotics.payloads import contacts, load_json, skin_packet
 from wott_hub.robotics.raw_signals import DISPLACEMENT_EVENT, displacement
 from wott_hub.td.raw import PRESSURE_GRID_RECORDED, RAW_IMAGE_RECORDED
 
+from ..numbers import PackedRecord, nodes_of
 from .packets import contact_blocks
 
 if TYPE_CHECKING:
@@ -132,14 +133,30 @@ class _NodeSource(Source):
         return [self.decode_many([rec])[0][0]]
 
     def decode_many(self, recs: list[Record]) -> list[np.ndarray]:
-        parts = [self.nodes(r) for r in recs]
-        ids = np.concatenate([p[0] for p in parts])
-        values = np.concatenate([p[1] for p in parts])
-        sample = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
+        """Packets read as numbers (``history/numbers.py``) gathered at once, the others (stored as
+        text) parsed by ``nodes``: the same values either way."""
+        packed: list[PackedRecord] = []
+        at: list[int] = []  # their positions in recs
+        for i, r in enumerate(recs):
+            if isinstance(r, PackedRecord) and r.packets.name == self.name:
+                packed.append(r)
+                at.append(i)
+        shape = self.features[0].shape[1:]
+        if packed:
+            sample, ids, values = nodes_of(packed)
+            sample = np.asarray(at, np.int64)[sample]
+        else:
+            sample, ids, values = np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
+        if len(packed) < len(recs):
+            taken = set(at)
+            parts = [(i, self.nodes(r)) for i, r in enumerate(recs) if i not in taken]
+            sample = np.concatenate([sample, *(np.full(len(p[0]), i, np.int64) for i, p in parts)])
+            ids = np.concatenate([ids, *(p[0] for _, p in parts)])
+            values = np.concatenate([values.reshape(-1, *shape), *(p[1] for _, p in parts)])
         rows = self.geom.rows_of(ids)
-        known = rows >= 0
-        out = np.zeros((len(parts), *self.features[0].shape), np.float32)
-        out[sample[known], rows[known]] = values[known]
+        known_rows = rows >= 0
+        out = np.zeros((len(recs), *self.features[0].shape), np.float32)
+        out[sample[known_rows], rows[known_rows]] = values[known_rows]
         return [out]
 
 

@@ -133,7 +133,7 @@ class ThingReader:
             sizes[s.name] = max([sizes.get(s.name, 0), *(len(r.data) for r in last)])
         self._groups = (
             [
-                _Pages(reader.pages(thing, start_ns + 1, end_ns, group, size), start_ns)
+                _Pages(reader.pages(thing, start_ns + 1, end_ns, group, size, numbers=True), start_ns)
                 for group, size in page_groups({n: sizes[n] for n in names}, page)
             ]
             if names and end_ns > start_ns

@@ -1,0 +1,181 @@
+"""A page read as numbers: packed skin and displacement packets as records carrying their numbers.
+
+History stores those packets packed (``codec``, ``field_codec``) and writes their text back on read,
+which a consumer of arrays (the learning export, ``learning/features.py``) then parses again: at
+30 frames/s and three skins, writing and parsing those texts cost several times what reading the
+packed numbers does. A page read with ``numbers`` (``StorageReader.pages``) gives the same records,
+each ``data`` the same text once read, but a packed ``skinDeformedDetection`` or ``skinDisplacement``
+packet stamped with its record's time (the flag SAME_TIME: every packet the hub's pipeline makes)
+comes as a ``PackedRecord``: its text unwritten until ``data`` is read (``codec.skin_text``,
+``events.fields.displacement_json``: the texts the codecs write back, by their contracts), its numbers
+in its page's ``Packets`` (every packet's nodes of the page one after the other, unpacked by one
+NumPy pass), which ``nodes_of`` gathers for many records at once.
+
+Every other payload (a packet stored as text: a foreign driver's, one the writer could not pack,
+rows from before the packed forms; a packet with a timeStamp of its own) is its text, exactly as
+``codec.decode_joined`` gives it. A consumer that reads numbers from ``PackedRecord``s must read the
+same values from the text of any other record: a faster path, never a second definition
+(``tests/history/learning/test_numbers.py`` compares the two on a recorded session).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple, TypeAlias
+
+import numpy as np
+import numpy.typing as npt
+
+from wott_hub.events.fields import SKIN_DISPLACEMENT, FieldArrays, displacement_json
+from wott_hub.events.record import KIND_EVENT, Record
+
+from .codec import _CHUNK, _PAD, PACKED, SKIN_EVENT, _decode_at, decode_many, skin_numbers_at, skin_text
+from .field_codec import PACKED_FIELD, field_numbers_at
+
+__all__ = ["PackedRecord", "Packets", "nodes_of", "numbered_records", "numbers_joined", "numbers_many"]
+
+_Int = npt.NDArray[np.int64]
+Value: TypeAlias = "str | _Found"
+"""A payload as a numbers read gives it: its text, or a packed packet found."""
+_SAME_TIME = 1  # both packed forms' flag (second byte): the packet's timeStamp is its record's time
+
+
+class Packets(NamedTuple):
+    """The packed packets of one name in a page: packet ``i``'s nodes are ``start[i]`` to
+    ``start[i] + n[i]`` of ``ids`` (int64) and ``micro`` (int64 µm: one per node for a skin packet,
+    x, y, z rows for a displacement)."""
+
+    name: str
+    start: _Int
+    n: _Int
+    ids: _Int
+    micro: _Int
+
+
+class PackedRecord(Record):
+    """A packed packet read as its numbers (``packets``, its ``index`` there); its text is written the
+    first time ``data`` is read (the slot stays empty until then, as ``FieldRecord``'s)."""
+
+    __slots__ = ("index", "packets")
+
+    def __init__(self, thing: str, seq: int, t_ns: int, packets: Packets, index: int) -> None:
+        super().__init__(thing, seq, KIND_EVENT, packets.name, t_ns, "")
+        del self.data
+        self.packets = packets
+        self.index = index
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "data":
+            p, i = self.packets, self.index
+            a, b = int(p.start[i]), int(p.start[i] + p.n[i])
+            text = self.data = (skin_text(self.t_ns, p.ids[a:b], p.micro[a:b]) if p.name == SKIN_EVENT
+                                else displacement_json(self.t_ns, FieldArrays(p.ids[a:b], p.micro[a:b])))
+            return text
+        raise AttributeError(name)
+
+
+def nodes_of(recs: Sequence[PackedRecord]) -> tuple[_Int, _Int, npt.NDArray[np.float64]]:
+    """(the position in ``recs`` of each node, its id, its value in mm: ``k / 1000`` of the stored µm
+    ``k``, the double its text reads as) of every node of ``recs``' packets, in their order; a few
+    NumPy calls per page the records come from, none per record."""
+    pages: dict[int, tuple[Packets, list[int], list[int]]] = {}
+    for pos, r in enumerate(recs):
+        page = pages.get(id(r.packets))
+        if page is None:
+            page = pages[id(r.packets)] = (r.packets, [], [])
+        page[1].append(pos)
+        page[2].append(r.index)
+    samples, ids, values = [], [], []
+    for p, positions, indexes in pages.values():
+        at = np.array(indexes, np.int64)
+        n = p.n[at]
+        node = np.repeat(p.start[at] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+        samples.append(np.repeat(np.array(positions, np.int64), n))
+        ids.append(p.ids[node])
+        values.append(p.micro[node] / 1000.0)
+    if len(pages) == 1:
+        return samples[0], ids[0], values[0]
+    return np.concatenate(samples), np.concatenate(ids), np.concatenate(values)
+
+
+def numbers_joined(joined: bytes, size: _Int, t_ns: _Int, names: Sequence[str], kinds: _Int) -> list[Value]:
+    """``codec.decode_joined`` of a page, the packets this module's docstring names as numbers."""
+    buf = np.frombuffer(joined, np.uint8)
+    if len(buf) != int(size.sum()) + len(_PAD):
+        raise ValueError("the joined payloads do not have the lengths given")
+    ends = np.cumsum(size)
+    kinds = np.asarray(kinds)
+    out: list[Value] = []
+    lo = 0
+    for i in range(0, len(size), _CHUNK):  # each chunk's own bytes, as decode_joined reads them
+        chunk = size[i:i + _CHUNK]
+        hi = int(ends[i + len(chunk) - 1]) + len(_PAD)
+        out += _chunk(joined, lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk, t_ns[i:i + _CHUNK],
+                      names[i:i + _CHUNK], kinds[i:i + _CHUNK])
+        lo = hi - len(_PAD)
+    return out
+
+
+def numbers_many(stored: Sequence[bytes | memoryview | str], t_ns: Sequence[int], names: Sequence[str],
+                 kinds: Sequence[int]) -> list[Value]:
+    """``numbers_joined`` of rows as the driver gives them (``codec.decode_many``'s input)."""
+    try:
+        joined = b"".join([*stored, _PAD])  # type: ignore[list-item]  # a str raises TypeError
+        times = np.fromiter(t_ns, np.int64, len(stored))
+    except (TypeError, OverflowError):  # a text row (before 0006), a time beyond int64: as text
+        return list(decode_many(stored, t_ns))
+    size = np.fromiter(map(len, stored), np.int64, len(stored))
+    return numbers_joined(joined, size, times, names, np.fromiter(kinds, np.int64, len(stored)))
+
+
+def _chunk(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
+           names: Sequence[str], kinds: _Int) -> list[Value]:
+    """``numbers_joined`` of at most ``codec._CHUNK`` rows at ``off`` in ``buf`` (``joined[base:]``)."""
+    head = np.where(size > 0, buf[off], 0)
+    same = (buf[off + 1] & _SAME_TIME) != 0  # the 16 NULs after the bytes: never read beyond them
+    event = kinds == KIND_EVENT
+    named = np.array(names, object)
+    skin = (head == PACKED) & same & event & (named == SKIN_EVENT)
+    field = (head == PACKED_FIELD) & same & event & (named == SKIN_DISPLACEMENT)
+    text = ~(skin | field)
+    if text.all():
+        return list(_decode_at(joined, base, buf, off, size, t_ns, None))
+    out = np.empty(len(off), object)
+    if text.any():
+        where = np.flatnonzero(text)
+        out[where] = _decode_at(joined, base, buf, off[where], size[where], t_ns[where], None)
+    if skin.any():
+        where = np.flatnonzero(skin)
+        n, ids, micro = skin_numbers_at(buf, off[where], size[where], t_ns[where])
+        out[where] = _Found(Packets(SKIN_EVENT, np.cumsum(n) - n, n, ids, micro))
+    if field.any():
+        where = np.flatnonzero(field)
+        numbers, n = field_numbers_at(buf, off[where], size[where], t_ns[where])
+        out[where] = _Found(Packets(SKIN_DISPLACEMENT, np.cumsum(n) - n, n, numbers.ids, numbers.micro))
+    values: list[Value] = out.tolist()
+    return values
+
+
+class _Found:
+    """A packed packet of a page's ``Packets``, numbered ``index`` there (set by ``numbered_records``)."""
+
+    __slots__ = ("packets",)
+
+    def __init__(self, packets: Packets) -> None:
+        self.packets = packets
+
+
+def numbered_records(thing: str, seqs: Sequence[int], kinds: Sequence[int], names: Sequence[str],
+                     times: Sequence[int], values: list[Value]) -> list[Record]:
+    """The records of a page read as numbers (``Columns.records`` of a page of texts)."""
+    out: list[Record] = []
+    counts: dict[int, int] = {}
+    for seq, kind, name, t_ns, v in zip(seqs, kinds, names, times, values, strict=True):
+        if v.__class__ is str:
+            out.append(Record(thing, seq, kind, name, t_ns, v))
+        else:
+            packets = v.packets  # type: ignore[union-attr]  # a _Found
+            i = counts.get(id(packets), 0)
+            counts[id(packets)] = i + 1
+            out.append(PackedRecord(thing, seq, t_ns, packets, i))
+    return out
