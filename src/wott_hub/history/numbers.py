@@ -21,7 +21,8 @@ same values from the text of any other record: a faster path, never a second def
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, NamedTuple, TypeAlias
+from itertools import repeat
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -32,11 +33,13 @@ from wott_hub.events.record import KIND_EVENT, Record
 from .codec import _CHUNK, _PAD, PACKED, SKIN_EVENT, _decode_at, decode_many, skin_numbers_at, skin_text
 from .field_codec import PACKED_FIELD, field_numbers_at
 
-__all__ = ["PackedRecord", "Packets", "nodes_of", "numbered_records", "numbers_joined", "numbers_many"]
+__all__ = [
+    "Numbered", "PackedRecord", "Packets", "nodes_of", "numbered_records", "numbers_joined", "numbers_many",
+]
 
 _Int = npt.NDArray[np.int64]
-Value: TypeAlias = "str | _Found"
-"""A payload as a numbers read gives it: its text, or a packed packet found."""
+_Column = Sequence[int] | _Int
+"""A page's column of integers: a NumPy array (``sqlite.JoinedPage``) or the driver's tuple."""
 _SAME_TIME = 1  # both packed forms' flag (second byte): the packet's timeStamp is its record's time
 
 
@@ -98,38 +101,51 @@ def nodes_of(recs: Sequence[PackedRecord]) -> tuple[_Int, _Int, npt.NDArray[np.f
     return np.concatenate(samples), np.concatenate(ids), np.concatenate(values)
 
 
-def numbers_joined(joined: bytes, size: _Int, t_ns: _Int, names: Sequence[str], kinds: _Int) -> list[Value]:
+class Numbered(NamedTuple):
+    """A page's payloads read as numbers: the texts of the rows at ``text_at``, and the rows at each
+    ``positions`` the packets of its ``Packets``, in their order."""
+
+    texts: list[str]
+    text_at: _Int
+    found: list[tuple[_Int, Packets]]
+
+
+def numbers_joined(joined: bytes, size: _Int, t_ns: _Int, names: Sequence[str], kinds: _Int) -> Numbered:
     """``codec.decode_joined`` of a page, the packets this module's docstring names as numbers."""
     buf = np.frombuffer(joined, np.uint8)
     if len(buf) != int(size.sum()) + len(_PAD):
         raise ValueError("the joined payloads do not have the lengths given")
     ends = np.cumsum(size)
     kinds = np.asarray(kinds)
-    out: list[Value] = []
+    out = Numbered([], np.empty(0, np.int64), [])
+    text_at = []
     lo = 0
     for i in range(0, len(size), _CHUNK):  # each chunk's own bytes, as decode_joined reads them
         chunk = size[i:i + _CHUNK]
         hi = int(ends[i + len(chunk) - 1]) + len(_PAD)
-        out += _chunk(joined, lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk, t_ns[i:i + _CHUNK],
+        part = _chunk(joined, lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk, t_ns[i:i + _CHUNK],
                       names[i:i + _CHUNK], kinds[i:i + _CHUNK])
+        out.texts.extend(part.texts)
+        text_at.append(part.text_at + i)
+        out.found.extend((at + i, packets) for at, packets in part.found)
         lo = hi - len(_PAD)
-    return out
+    return out._replace(text_at=np.concatenate(text_at)) if text_at else out
 
 
 def numbers_many(stored: Sequence[bytes | memoryview | str], t_ns: Sequence[int], names: Sequence[str],
-                 kinds: Sequence[int]) -> list[Value]:
+                 kinds: Sequence[int]) -> Numbered:
     """``numbers_joined`` of rows as the driver gives them (``codec.decode_many``'s input)."""
     try:
         joined = b"".join([*stored, _PAD])  # type: ignore[list-item]  # a str raises TypeError
         times = np.fromiter(t_ns, np.int64, len(stored))
     except (TypeError, OverflowError):  # a text row (before 0006), a time beyond int64: as text
-        return list(decode_many(stored, t_ns))
+        return Numbered(decode_many(stored, t_ns), np.arange(len(stored)), [])
     size = np.fromiter(map(len, stored), np.int64, len(stored))
     return numbers_joined(joined, size, times, names, np.fromiter(kinds, np.int64, len(stored)))
 
 
 def _chunk(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
-           names: Sequence[str], kinds: _Int) -> list[Value]:
+           names: Sequence[str], kinds: _Int) -> Numbered:
     """``numbers_joined`` of at most ``codec._CHUNK`` rows at ``off`` in ``buf`` (``joined[base:]``)."""
     head = np.where(size > 0, buf[off], 0)
     same = (buf[off + 1] & _SAME_TIME) != 0  # the 16 NULs after the bytes: never read beyond them
@@ -139,43 +155,42 @@ def _chunk(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size
     field = (head == PACKED_FIELD) & same & event & (named == SKIN_DISPLACEMENT)
     text = ~(skin | field)
     if text.all():
-        return list(_decode_at(joined, base, buf, off, size, t_ns, None))
-    out = np.empty(len(off), object)
-    if text.any():
-        where = np.flatnonzero(text)
-        out[where] = _decode_at(joined, base, buf, off[where], size[where], t_ns[where], None)
+        return Numbered(_decode_at(joined, base, buf, off, size, t_ns, None), np.arange(len(off)), [])
+    out = Numbered([], np.flatnonzero(text), [])
+    if len(out.text_at):
+        at = out.text_at
+        out.texts.extend(_decode_at(joined, base, buf, off[at], size[at], t_ns[at], None))
     if skin.any():
-        where = np.flatnonzero(skin)
-        n, ids, micro = skin_numbers_at(buf, off[where], size[where], t_ns[where])
-        out[where] = _Found(Packets(SKIN_EVENT, np.cumsum(n) - n, n, ids, micro))
+        at = np.flatnonzero(skin)
+        n, ids, micro = skin_numbers_at(buf, off[at], size[at], t_ns[at])
+        out.found.append((at, Packets(SKIN_EVENT, np.cumsum(n) - n, n, ids, micro)))
     if field.any():
-        where = np.flatnonzero(field)
-        numbers, n = field_numbers_at(buf, off[where], size[where], t_ns[where])
-        out[where] = _Found(Packets(SKIN_DISPLACEMENT, np.cumsum(n) - n, n, numbers.ids, numbers.micro))
-    values: list[Value] = out.tolist()
-    return values
-
-
-class _Found:
-    """A packed packet of a page's ``Packets``, numbered ``index`` there (set by ``numbered_records``)."""
-
-    __slots__ = ("packets",)
-
-    def __init__(self, packets: Packets) -> None:
-        self.packets = packets
-
-
-def numbered_records(thing: str, seqs: Sequence[int], kinds: Sequence[int], names: Sequence[str],
-                     times: Sequence[int], values: list[Value]) -> list[Record]:
-    """The records of a page read as numbers (``Columns.records`` of a page of texts)."""
-    out: list[Record] = []
-    counts: dict[int, int] = {}
-    for seq, kind, name, t_ns, v in zip(seqs, kinds, names, times, values, strict=True):
-        if v.__class__ is str:
-            out.append(Record(thing, seq, kind, name, t_ns, v))
-        else:
-            packets = v.packets  # type: ignore[union-attr]  # a _Found
-            i = counts.get(id(packets), 0)
-            counts[id(packets)] = i + 1
-            out.append(PackedRecord(thing, seq, t_ns, packets, i))
+        at = np.flatnonzero(field)
+        numbers, n = field_numbers_at(buf, off[at], size[at], t_ns[at])
+        out.found.append((at, Packets(SKIN_DISPLACEMENT, np.cumsum(n) - n, n, numbers.ids, numbers.micro)))
     return out
+
+
+def numbered_records(thing: str, seqs: _Column, kinds: _Column, names: Sequence[str], times: _Column,
+                     page: Numbered) -> list[Record]:
+    """The records of a page read as numbers (``Columns.records`` of a page of texts): made by ``map``
+    (C), no Python per record but their ``__init__``."""
+    if not page.found:
+        return list(map(Record, repeat(thing), _listed(seqs), _listed(kinds), names, _listed(times),
+                        page.texts))
+    seq_of, time_of = np.asarray(seqs), np.asarray(times)
+    out = np.empty(len(seq_of), object)
+    at = page.text_at
+    if len(at):
+        out[at] = list(map(Record, repeat(thing), seq_of[at].tolist(), np.asarray(kinds)[at].tolist(),
+                           np.array(names, object)[at].tolist(), time_of[at].tolist(), page.texts))
+    for at, packets in page.found:
+        out[at] = list(map(PackedRecord, repeat(thing), seq_of[at].tolist(), time_of[at].tolist(),
+                           repeat(packets), range(len(at))))
+    records: list[Record] = out.tolist()
+    return records
+
+
+def _listed(values: _Column) -> Sequence[int]:
+    """Python ints of a column (a page's NumPy array, a driver's tuple as it is)."""
+    return values.tolist() if isinstance(values, np.ndarray) else values

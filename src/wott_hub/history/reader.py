@@ -97,9 +97,8 @@ def _joined_columns(page: JoinedPage) -> Columns:
 def _joined_numbers(thing: str, page: JoinedPage) -> list[Record]:
     from .numbers import numbered_records, numbers_joined
 
-    values = numbers_joined(page.joined, page.sizes, page.times, page.names, page.kinds)
-    return numbered_records(thing, page.seqs.tolist(), page.kinds.tolist(), page.names, page.times.tolist(),
-                            values)
+    numbers = numbers_joined(page.joined, page.sizes, page.times, page.names, page.kinds)
+    return numbered_records(thing, page.seqs, page.kinds, page.names, page.times, numbers)
 
 
 def _rows_numbers(thing: str, rows: Sequence[Sequence[Any]]) -> list[Record]:
