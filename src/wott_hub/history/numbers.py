@@ -181,12 +181,13 @@ def numbered_records(thing: str, seqs: _Column, kinds: _Column, names: Sequence[
     seq_of, time_of = np.asarray(seqs), np.asarray(times)
     out = np.empty(len(seq_of), object)
     at = page.text_at
-    if len(at):
-        out[at] = list(map(Record, repeat(thing), seq_of[at].tolist(), np.asarray(kinds)[at].tolist(),
-                           np.array(names, object)[at].tolist(), time_of[at].tolist(), page.texts))
+    if len(at):  # (np.fromiter: an object array of them without NumPy asking each for an array form)
+        out[at] = np.fromiter(map(Record, repeat(thing), seq_of[at].tolist(), np.asarray(kinds)[at].tolist(),
+                                  np.array(names, object)[at].tolist(), time_of[at].tolist(), page.texts),
+                              object, len(at))
     for at, packets in page.found:
-        out[at] = list(map(PackedRecord, repeat(thing), seq_of[at].tolist(), time_of[at].tolist(),
-                           repeat(packets), range(len(at))))
+        out[at] = np.fromiter(map(PackedRecord, repeat(thing), seq_of[at].tolist(), time_of[at].tolist(),
+                                  repeat(packets), range(len(at))), object, len(at))
     records: list[Record] = out.tolist()
     return records
 
