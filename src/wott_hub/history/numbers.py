@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from itertools import repeat
+from operator import attrgetter
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -80,25 +81,29 @@ class PackedRecord(Record):
 def nodes_of(recs: Sequence[PackedRecord]) -> tuple[_Int, _Int, npt.NDArray[np.float64]]:
     """(the position in ``recs`` of each node, its id, its value in mm: ``k / 1000`` of the stored µm
     ``k``, the double its text reads as) of every node of ``recs``' packets, in their order; a few
-    NumPy calls per page the records come from, none per record."""
-    pages: dict[int, tuple[Packets, list[int], list[int]]] = {}
-    for pos, r in enumerate(recs):
-        page = pages.get(id(r.packets))
-        if page is None:
-            page = pages[id(r.packets)] = (r.packets, [], [])
-        page[1].append(pos)
-        page[2].append(r.index)
-    samples, ids, values = [], [], []
-    for p, positions, indexes in pages.values():
-        at = np.array(indexes, np.int64)
-        n = p.n[at]
-        node = np.repeat(p.start[at] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
-        samples.append(np.repeat(np.array(positions, np.int64), n))
-        ids.append(p.ids[node])
-        values.append(p.micro[node] / 1000.0)
+    NumPy calls per page the records come from, none per record (their fields read by ``map``)."""
+    index = np.fromiter(map(_INDEX, recs), np.int64, len(recs))
+    of = list(map(_PACKETS, recs))
+    pages = dict(zip(map(id, of), of, strict=True))
     if len(pages) == 1:
-        return samples[0], ids[0], values[0]
-    return np.concatenate(samples), np.concatenate(ids), np.concatenate(values)
+        return _nodes(next(iter(pages.values())), index, np.arange(len(recs)))
+    page_id = np.fromiter(map(id, of), np.uint64, len(of))
+    parts = [_nodes(p, index[at], at) for key, p in pages.items()
+             if len(at := np.flatnonzero(page_id == key))]
+    samples, ids, values = zip(*parts, strict=True)
+    order = np.argsort(np.concatenate(samples), kind="stable")  # in the records' order, and their nodes'
+    return np.concatenate(samples)[order], np.concatenate(ids)[order], np.concatenate(values)[order]
+
+
+def _nodes(p: Packets, index: _Int, at: _Int) -> tuple[_Int, _Int, npt.NDArray[np.float64]]:
+    """``nodes_of`` of the packets ``index`` of ``p``, the records at ``at``."""
+    n = p.n[index]
+    node = np.repeat(p.start[index] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+    return np.repeat(at, n), p.ids[node], p.micro[node] / 1000.0
+
+
+_INDEX = attrgetter("index")
+_PACKETS = attrgetter("packets")
 
 
 class Numbered(NamedTuple):

@@ -179,3 +179,22 @@ def test_the_export_reads_the_values_the_text_gives(session, reader_of, tmp_path
     assert np.isclose(deformation, 0.0004).sum() == FRAMES // 10
     stats = [json.loads((o / "meta/stats.json").read_text()) for o in outs]
     assert stats[0] == stats[1]
+
+
+def test_the_skin_sources_decode_pages_of_numbers_as_pages_of_text(session, reader_of):
+    """A block of samples from many pages (as a block that spans pages has), packed and text-stored
+    mixed: the same arrays from the records read as numbers as from those read as text."""
+    from wott_hub.history.learning.features import DeformationSource, DisplacementSource
+    from wott_hub.history.learning.plan import plan
+
+    reader = reader_of(session)
+    (thing,) = plan(reader, [THING], T0 + 10**10).things
+    sources = [s for s in thing.sources if isinstance(s, DeformationSource | DisplacementSource)]
+    assert len(sources) == 2
+    for source in sources:
+        text = [r for p in reader.pages(THING, page=7, names=[source.name]) for r in p]
+        numbers = [r for p in reader.pages(THING, page=7, names=[source.name], numbers=True) for r in p]
+        assert len({id(r.packets) for r in numbers if isinstance(r, PackedRecord)}) > 10  # many pages
+        for picked in (slice(None), slice(3, None, 4), slice(None, None, -1)):
+            want, got = source.decode_many(text[picked])[0], source.decode_many(numbers[picked])[0]
+            assert want.any() and np.array_equal(got, want), (source.name, picked)

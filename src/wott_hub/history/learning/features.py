@@ -27,7 +27,9 @@ import base64
 import json
 import re
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, NamedTuple
+from itertools import repeat
+from operator import attrgetter
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 
@@ -59,6 +61,7 @@ __all__ = [
     "block_values",
 ]
 
+_NAME = attrgetter("name")
 GRID_EVENT = PRESSURE_GRID_RECORDED
 IMAGE_EVENT = RAW_IMAGE_RECORDED
 
@@ -136,21 +139,19 @@ class _NodeSource(Source):
     def decode_many(self, recs: list[Record]) -> list[np.ndarray]:
         """Packets read as numbers (``history/numbers.py``) gathered at once, the others (stored as
         text) parsed by ``nodes``: the same values either way."""
-        packed: list[PackedRecord] = []
-        at: list[int] = []  # their positions in recs
-        for i, r in enumerate(recs):
-            if isinstance(r, PackedRecord) and r.packets.name == self.name:
-                packed.append(r)
-                at.append(i)
+        is_packed = np.fromiter(map(isinstance, recs, repeat(PackedRecord)), bool, len(recs))
+        # (a PackedRecord's name is its packets')
+        is_packed &= np.fromiter(map(self.name.__eq__, map(_NAME, recs)), bool, len(recs))
+        at = np.flatnonzero(is_packed)
+        packed = cast("list[PackedRecord]", [recs[i] for i in at.tolist()] if len(at) < len(recs) else recs)
         shape = self.features[0].shape[1:]
-        if packed:
+        if len(at):
             sample, ids, values = nodes_of(packed)
-            sample = np.asarray(at, np.int64)[sample]
+            sample = at[sample]
         else:
             sample, ids, values = np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
-        if len(packed) < len(recs):
-            taken = set(at)
-            parts = [(i, self.nodes(r)) for i, r in enumerate(recs) if i not in taken]
+        if len(at) < len(recs):
+            parts = [(i, self.nodes(recs[i])) for i in np.flatnonzero(~is_packed).tolist()]
             sample = np.concatenate([sample, *(np.full(len(p[0]), i, np.int64) for i, p in parts)])
             ids = np.concatenate([ids, *(p[0] for _, p in parts)])
             values = np.concatenate([values.reshape(-1, *shape), *(p[1] for _, p in parts)])
