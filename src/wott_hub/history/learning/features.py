@@ -16,14 +16,16 @@ action, a black image), which is what a skin that sent nothing is:
 - ``rawImageRecorded`` -> ``observation.images.<id>.<camera>``, a video (H, W, 3) of the recorded PNGs,
   grey made RGB.
 
-N is the Thing's ``skinNodes`` in their order (node ids in ``meta/wott.json``).
+N is the Thing's ``skinNodes`` in their order (node ids in ``meta/wott.json``). The two skin streams'
+packets stored packed come read as numbers (``history/numbers.py``: ``PackedRecord``), gathered a block
+at a time; those stored as text go through the functions named above: the same values either way.
 ``--action THING.PROPERTY`` adds ``PropertySource``: any recorded property of numbers, flattened
 (``action``, float32 (D,)).
 """
 
 from __future__ import annotations
 
-import base64
+import binascii
 import json
 import re
 from dataclasses import dataclass, field
@@ -91,6 +93,9 @@ class Source:
     name: str
     age: str  # its component of the Thing's age column
     features: list[Feature] = field(default_factory=list)
+
+    picky = False
+    """Whether ``accepts`` refuses any record of ``name`` (``resample.Stream``)."""
 
     def accepts(self, rec: Record) -> bool:
         return True
@@ -334,6 +339,8 @@ class CameraSource(Source):
         )
         self.camera = camera
 
+    picky = True
+
     def accepts(self, rec: Record) -> bool:
         found = _CAMERA.search(rec.data, 0, 400)  # the recorder writes the camera before the image
         if found is not None:
@@ -348,7 +355,7 @@ class CameraSource(Source):
         its video process, which decodes them (``image``): the base64 decoded on the export's side,
         the PNG on the video's, the work of each image shared between the two cores."""
         try:
-            return EncodedImage(rec.seq, base64.b64decode(load_json(rec.data)["image"]))
+            return EncodedImage(rec.seq, binascii.a2b_base64(load_json(rec.data)["image"]))  # b64decode's
         except (ValueError, KeyError, TypeError) as e:
             raise InvalidInput(self._not_png(e)) from None
 

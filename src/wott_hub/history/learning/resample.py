@@ -64,6 +64,9 @@ class Stream(Protocol):
     name: str
     """The affordance its records have."""
 
+    picky: bool
+    """False: every record of ``name`` is this stream's (``accepts`` is not asked)."""
+
     def accepts(self, rec: Record) -> bool:
         """Whether a record of ``name`` is this stream's (a camera picks its own images)."""
         ...
@@ -162,7 +165,7 @@ class ThingReader:
                 for name, takers in by_name.items():  # each name's records picked by C-level iterators
                     of_name = list(compress(page, map(name.__eq__, names)))
                     for stream, samples in takers:
-                        samples.waiting.extend(filter(stream.accepts, of_name))
+                        samples.waiting.extend(filter(stream.accepts, of_name) if stream.picky else of_name)
                 group.reached = max(group.reached, page[-1].t_ns)
 
     def hold(self, times: np.ndarray) -> list[Held]:
