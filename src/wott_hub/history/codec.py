@@ -51,7 +51,7 @@ from wott_hub.events.record import KIND_EVENT, Record, SkinArrays
 from .field_codec import PACKED_FIELD, encode_fields, field_texts, field_texts_at, join_spans
 
 __all__ = ["PACKED", "PACKED_FIELD", "SKIN_EVENT", "decode", "decode_joined", "decode_many", "encode",
-           "encode_records"]
+           "encode_records", "skin_numbers_at", "skin_text"]
 
 PACKED = 0x01
 _MARK = bytes((PACKED,))
@@ -561,6 +561,20 @@ def _decode_each(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
     for i, text in zip(where, _texts(packets), strict=True):
         out[i] = text
     return out
+
+
+def skin_numbers_at(buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int) -> tuple[_Int, _Int, _Int]:
+    """(nodes per packet, every packet's ids one after the other, their intensities in µm) of the
+    packed packets at ``off`` in ``buf`` (which ends with 16 NUL bytes): the numbers their texts
+    are written from, for a reader that wants the numbers (``history.numbers``)."""
+    p = _unpack_at(buf, off, size, t_ns)
+    return p.n, p.ids, p.micro
+
+
+def skin_text(t_ns: int, ids: _Int, micro: _Int) -> str:
+    """The text of one packet of ``timeStamp`` ``t_ns`` (the text ``decode_many`` gives for it)."""
+    return _texts(_Packets(np.array([t_ns], np.int64), np.array([len(ids)], np.int64),
+                           ids.astype(np.int64, copy=False), micro.astype(np.int64, copy=False)))[0]
 
 
 def decode(stored: Stored, t_ns: int) -> str:

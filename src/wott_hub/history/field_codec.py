@@ -42,7 +42,7 @@ from wott_hub.events.fields import (
 )
 from wott_hub.events.record import KIND_EVENT, Record
 
-__all__ = ["PACKED_FIELD", "encode_fields", "field_texts", "field_texts_at", "join_spans"]
+__all__ = ["PACKED_FIELD", "encode_fields", "field_numbers_at", "field_texts", "field_texts_at", "join_spans"]
 
 PACKED_FIELD = 0x02
 _SAME_TIME, _IDS16, _VALUES16 = 1, 2, 4
@@ -210,6 +210,15 @@ def _unpack(buf: npt.NDArray[np.uint8], off: npt.NDArray[np.int64], size: npt.ND
     k = np.arange(len(pv)) - (3 * (np.cumsum(n) - n))[pv]
     micro = _le(buf, values_at[pv] + k * value_width[pv], value_width[pv], signed=True).reshape(-1, 3)
     return ts.tolist(), FieldArrays(ids, micro), n
+
+
+def field_numbers_at(buf: npt.NDArray[np.uint8], off: npt.NDArray[np.int64], size: npt.NDArray[np.int64],
+                     t_ns: npt.NDArray[np.int64]) -> tuple[FieldArrays, npt.NDArray[np.int64]]:
+    """(the numbers of every packet one after the other, nodes per packet) of the packed packets at
+    ``off`` in ``buf`` (which ends with 16 NUL bytes): what their texts are written from, for a
+    reader that wants the numbers (``history.numbers``)."""
+    _, numbers, n = _unpack(buf, off, size, t_ns)
+    return numbers, n
 
 
 def field_texts(stored: Sequence[bytes | memoryview], t_ns: Sequence[int]) -> list[str]:

@@ -52,6 +52,7 @@ _T = ThingRow.__table__
 
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
+_Page = TypeVar("_Page")
 
 
 def _guarded(method: Callable[_P, _R]) -> Callable[_P, _R]:
@@ -91,6 +92,20 @@ def _joined_columns(page: JoinedPage) -> Columns:
 
     return Columns(page.seqs.tolist(), page.times.tolist(), page.kinds.tolist(), page.names,
                     decode_joined(page.joined, page.sizes, page.times))
+
+
+def _joined_numbers(thing: str, page: JoinedPage) -> list[Record]:
+    from .numbers import numbered_records, numbers_joined
+
+    numbers = numbers_joined(page.joined, page.sizes, page.times, page.names, page.kinds)
+    return numbered_records(thing, page.seqs, page.kinds, page.names, page.times, numbers)
+
+
+def _rows_numbers(thing: str, rows: Sequence[Sequence[Any]]) -> list[Record]:
+    from .numbers import numbered_records, numbers_many
+
+    seqs, times, kinds, names, stored = zip(*rows, strict=True)
+    return numbered_records(thing, seqs, kinds, names, times, numbers_many(stored, times, names, kinds))
 
 
 class HistoryReader:
@@ -291,13 +306,27 @@ class HistoryReader:
         return _columns(rows).records(thing) if rows else []
 
     def pages(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
-              names: list[str] | None = None, page: int = 20_000) -> Iterator[list[Record]]:
+              names: list[str] | None = None, page: int = 20_000, *,
+              numbers: bool = False) -> Iterator[list[Record]]:
+        if numbers:  # history/numbers.py
+            yield from self._read(thing, t_from_ns, t_to_ns, names, page,
+                                  functools.partial(_joined_numbers, thing),
+                                  functools.partial(_rows_numbers, thing))
+            return
         for cols in self.columns(thing, t_from_ns, t_to_ns, names, page):
             yield cols.records(thing)
 
     def columns(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
                 names: list[str] | None = None, page: int = 20_000) -> Iterator[Columns]:
-        """On SQLite each page is one row of ``sqlite.JOINED``, the next one read in a thread of its
+        """The pages as ``Columns`` (``_read``)."""
+        return self._read(thing, t_from_ns, t_to_ns, names, page, _joined_columns, _columns)
+
+    def _read(self, thing: str, t_from_ns: int | None, t_to_ns: int | None, names: list[str] | None,
+              page: int, of_joined: Callable[[JoinedPage], _Page],
+              of_rows: Callable[[Sequence[Sequence[Any]]], _Page]) -> Iterator[_Page]:
+        """``columns``' pages, each made by ``of_joined`` or ``of_rows``.
+
+        On SQLite each page is one row of ``sqlite.JOINED``, the next one read in a thread of its
         own while this one is decoded and used (a query is one step of SQLite, run without the
         GIL: it overlaps the Python work); elsewhere, and for a page ``JOINED`` cannot give, the
         driver's rows transposed by one C-level ``zip``. The first page is at most ``FIRST_PAGE``
@@ -326,7 +355,7 @@ class HistoryReader:
                     cursor = int(joined.seqs[-1])
                     if cursor < hi and pool is not None:
                         ahead = pool.submit(self._joined, key, cursor, hi, t_from_ns, t_to_ns, names, page)
-                    yield _joined_columns(joined)
+                    yield of_joined(joined)
                     continue
                 rows = self._fetch(_seq_range(key, cursor, hi, size))
                 size = page
@@ -338,7 +367,7 @@ class HistoryReader:
                     hi_t = t_to_ns if t_to_ns is not None else 1 << 63
                     rows = [r for r in rows if lo_t <= r[1] <= hi_t and (not names or r[3] in names)]
                 if rows:
-                    yield _columns(rows)
+                    yield of_rows(rows)
         finally:
             if pool is not None:
                 pool.shutdown(wait=False, cancel_futures=True)

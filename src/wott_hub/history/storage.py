@@ -144,8 +144,11 @@ class StorageReader(Protocol):
         ...
 
     def pages(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,
-              names: list[str] | None = None, page: int = 20_000) -> Iterator[list[Record]]:
-        """``thing``'s records in [t_from, t_to] (only ``names``, if given) in seq (= time) order."""
+              names: list[str] | None = None, page: int = 20_000, *,
+              numbers: bool = False) -> Iterator[list[Record]]:
+        """``thing``'s records in [t_from, t_to] (only ``names``, if given) in seq (= time) order;
+        ``numbers``: packed skin and displacement packets as records carrying their numbers, their
+        text written only if read (``history/numbers.py``; the same records otherwise)."""
         ...
 
     def columns(self, thing: str, t_from_ns: int | None = None, t_to_ns: int | None = None,

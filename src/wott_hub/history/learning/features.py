@@ -16,18 +16,22 @@ action, a black image), which is what a skin that sent nothing is:
 - ``rawImageRecorded`` -> ``observation.images.<id>.<camera>``, a video (H, W, 3) of the recorded PNGs,
   grey made RGB.
 
-N is the Thing's ``skinNodes`` in their order (node ids in ``meta/wott.json``).
+N is the Thing's ``skinNodes`` in their order (node ids in ``meta/wott.json``). The two skin streams'
+packets stored packed come read as numbers (``history/numbers.py``: ``PackedRecord``), gathered a block
+at a time; those stored as text go through the functions named above: the same values either way.
 ``--action THING.PROPERTY`` adds ``PropertySource``: any recorded property of numbers, flattened
 (``action``, float32 (D,)).
 """
 
 from __future__ import annotations
 
-import base64
+import binascii
 import json
 import re
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from itertools import repeat
+from operator import attrgetter
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 
@@ -36,6 +40,7 @@ from wott_hub.robotics.payloads import contacts, load_json, skin_packet
 from wott_hub.robotics.raw_signals import DISPLACEMENT_EVENT, displacement
 from wott_hub.td.raw import PRESSURE_GRID_RECORDED, RAW_IMAGE_RECORDED
 
+from ..numbers import PackedRecord, nodes_of
 from .packets import contact_blocks
 
 if TYPE_CHECKING:
@@ -49,6 +54,7 @@ __all__ = [
     "ContactsSource",
     "DeformationSource",
     "DisplacementSource",
+    "EncodedImage",
     "Feature",
     "GridSource",
     "PropertySource",
@@ -57,6 +63,7 @@ __all__ = [
     "block_values",
 ]
 
+_NAME = attrgetter("name")
 GRID_EVENT = PRESSURE_GRID_RECORDED
 IMAGE_EVENT = RAW_IMAGE_RECORDED
 
@@ -86,6 +93,9 @@ class Source:
     name: str
     age: str  # its component of the Thing's age column
     features: list[Feature] = field(default_factory=list)
+
+    picky = False
+    """Whether ``accepts`` refuses any record of ``name`` (``resample.Stream``)."""
 
     def accepts(self, rec: Record) -> bool:
         return True
@@ -132,14 +142,28 @@ class _NodeSource(Source):
         return [self.decode_many([rec])[0][0]]
 
     def decode_many(self, recs: list[Record]) -> list[np.ndarray]:
-        parts = [self.nodes(r) for r in recs]
-        ids = np.concatenate([p[0] for p in parts])
-        values = np.concatenate([p[1] for p in parts])
-        sample = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
+        """Packets read as numbers (``history/numbers.py``) gathered at once, the others (stored as
+        text) parsed by ``nodes``: the same values either way."""
+        is_packed = np.fromiter(map(isinstance, recs, repeat(PackedRecord)), bool, len(recs))
+        # (a PackedRecord's name is its packets')
+        is_packed &= np.fromiter(map(self.name.__eq__, map(_NAME, recs)), bool, len(recs))
+        at = np.flatnonzero(is_packed)
+        packed = cast("list[PackedRecord]", [recs[i] for i in at.tolist()] if len(at) < len(recs) else recs)
+        shape = self.features[0].shape[1:]
+        if len(at):
+            sample, ids, values = nodes_of(packed)
+            sample = at[sample]
+        else:
+            sample, ids, values = np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
+        if len(at) < len(recs):
+            parts = [(i, self.nodes(recs[i])) for i in np.flatnonzero(~is_packed).tolist()]
+            sample = np.concatenate([sample, *(np.full(len(p[0]), i, np.int64) for i, p in parts)])
+            ids = np.concatenate([ids, *(p[0] for _, p in parts)])
+            values = np.concatenate([values.reshape(-1, *shape), *(p[1] for _, p in parts)])
         rows = self.geom.rows_of(ids)
-        known = rows >= 0
-        out = np.zeros((len(parts), *self.features[0].shape), np.float32)
-        out[sample[known], rows[known]] = values[known]
+        known_rows = rows >= 0
+        out = np.zeros((len(recs), *self.features[0].shape), np.float32)
+        out[sample[known_rows], rows[known_rows]] = values[known_rows]
         return [out]
 
 
@@ -315,6 +339,8 @@ class CameraSource(Source):
         )
         self.camera = camera
 
+    picky = True
+
     def accepts(self, rec: Record) -> bool:
         found = _CAMERA.search(rec.data, 0, 400)  # the recorder writes the camera before the image
         if found is not None:
@@ -324,27 +350,44 @@ class CameraSource(Source):
         except (ValueError, AttributeError):
             return False
 
-    def image(self, rec: Record) -> np.ndarray:
+    def encoded(self, rec: Record) -> EncodedImage:
+        """A recorded image's PNG bytes (InvalidInput if the record holds none): what the export hands
+        its video process, which decodes them (``image``): the base64 decoded on the export's side,
+        the PNG on the video's, the work of each image shared between the two cores."""
+        try:
+            return EncodedImage(rec.seq, binascii.a2b_base64(load_json(rec.data)["image"]))  # b64decode's
+        except (ValueError, KeyError, TypeError) as e:
+            raise InvalidInput(self._not_png(e)) from None
+
+    def image(self, rec: Record | EncodedImage) -> np.ndarray:
         """H x W x 3 uint8 of a recorded image (InvalidInput if it is not a PNG of the first one's size)."""
         import io
 
         from PIL import Image, UnidentifiedImageError
 
         h, w, _ = self.features[0].shape
+        png = rec.png if isinstance(rec, EncodedImage) else self.encoded(rec).png
         try:
-            png = base64.b64decode(load_json(rec.data)["image"])
             with Image.open(io.BytesIO(png)) as img:  # an RGB image as it is: no converted copy
                 rgb = np.asarray(img if img.mode == "RGB" else img.convert("RGB"))
         except (ValueError, KeyError, TypeError, UnidentifiedImageError, OSError) as e:
-            raise InvalidInput(
-                f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})"
-            ) from None
+            raise InvalidInput(self._not_png(e)) from None
         if rgb.shape != (h, w, 3):
             raise InvalidInput(
                 f"{self.thing}: camera {self.camera!r} changed size ({rgb.shape[1]} x {rgb.shape[0]}, "
                 f"first {w} x {h}): a video keeps one size"
             )
         return rgb
+
+    def _not_png(self, e: BaseException) -> str:
+        return f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})"
+
+
+class EncodedImage(NamedTuple):
+    """A recorded image's PNG bytes and its record's seq (``CameraSource.encoded``)."""
+
+    seq: int
+    png: bytes
 
 
 class PropertySource(Source):

@@ -11,6 +11,10 @@ displacements gain nothing this way: their per-node values cost the same either 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from itertools import chain
+from operator import attrgetter
+
 import msgspec
 import numpy as np
 
@@ -36,16 +40,25 @@ def contact_blocks(texts: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray
         packets = msgspec.json.decode("[" + ",".join(texts) + "]", type=list[_Contacts])
     except (msgspec.DecodeError, msgspec.ValidationError):
         return None
-    forces: list[_XYZ] = []
-    for p in packets:
-        if not p.contactForces and p.contactLocations:
-            forces.extend(_XYZ(0.0, 0.0, 0.0) for _ in p.contactLocations)
-        elif len(p.contactForces) != len(p.contactLocations):
-            return None
-        else:
-            forces.extend(p.contactForces)
-    locs = [c for p in packets for c in p.contactLocations]
-    loc = np.array([(c.x, c.y, c.z) for c in locs], np.float64).reshape(-1, 3)
-    force = np.array([(c.x, c.y, c.z) for c in forces], np.float64).reshape(-1, 3)
-    counts = np.fromiter((len(p.contactLocations) for p in packets), np.int64, count=len(packets))
-    return counts, loc, force
+    n_loc = np.fromiter(map(len, map(_LOCATIONS, packets)), np.int64, len(packets))
+    n_force = np.fromiter(map(len, map(_FORCES, packets)), np.int64, len(packets))
+    if ((n_force != n_loc) & (n_force > 0)).any():
+        return None
+    loc = _xyz(chain.from_iterable(map(_LOCATIONS, packets)), int(n_loc.sum()))
+    if (n_force == n_loc).all():
+        force = _xyz(chain.from_iterable(map(_FORCES, packets)), int(n_loc.sum()))
+    else:  # samples without forces (a device that measures none) get zeros, one per location
+        force = np.zeros_like(loc)
+        measured = np.repeat(n_force > 0, n_loc)
+        force[measured] = _xyz(chain.from_iterable(map(_FORCES, packets)), int(n_force.sum()))
+    return n_loc, loc, force
+
+
+_LOCATIONS = attrgetter("contactLocations")
+_FORCES = attrgetter("contactForces")
+_XYZ_OF = attrgetter("x", "y", "z")
+
+
+def _xyz(points: Iterable[_XYZ], n: int) -> np.ndarray:
+    """N x 3 float64 of ``n`` points, read by C-level iterators (no Python per point)."""
+    return np.fromiter(chain.from_iterable(map(_XYZ_OF, points)), np.float64, 3 * n).reshape(-1, 3)

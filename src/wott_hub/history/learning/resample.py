@@ -21,6 +21,8 @@ are put in time order first.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
+from itertools import compress
+from operator import attrgetter
 from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
@@ -37,6 +39,8 @@ LATE_NS = 2_000_000_000
 PAGE_BYTES = 8 << 20
 """About the payload bytes a page holds at most (a page is read ahead while the one before is used)."""
 _TIME_NS = 10**9
+_T_NS = attrgetter("t_ns")
+_NAME = attrgetter("name")
 
 
 def frame_times(start_ns: int, fps: int, k0: int, k1: int) -> np.ndarray:
@@ -60,6 +64,9 @@ class Stream(Protocol):
     name: str
     """The affordance its records have."""
 
+    picky: bool
+    """False: every record of ``name`` is this stream's (``accepts`` is not asked)."""
+
     def accepts(self, rec: Record) -> bool:
         """Whether a record of ``name`` is this stream's (a camera picks its own images)."""
         ...
@@ -74,15 +81,19 @@ class _Samples:
 
     def hold(self, times: np.ndarray) -> Held:
         w = self.waiting
-        if w and any(w[i].t_ns > w[i + 1].t_ns for i in range(len(w) - 1)):
-            w.sort(key=lambda r: r.t_ns)  # stable: equal times keep seq order
-        upto = int(times[-1])
-        n = next((i for i, r in enumerate(w) if r.t_ns > upto), len(w))
+        t = np.fromiter(map(_T_NS, w), np.int64, len(w))
+        if len(t) > 1 and (t[1:] < t[:-1]).any():
+            order = np.argsort(t, kind="stable")  # stable: equal times keep seq order
+            w, t = [w[i] for i in order.tolist()], t[order]
+        n = int(np.searchsorted(t, times[-1], side="right"))  # those at or before the last frame
         fresh, self.waiting = w[:n], w[n:]
         samples = ([self.last] if self.last is not None else []) + fresh
         if not samples:
             return Held(samples, np.full(len(times), -1, np.int64), np.full(len(times), -1.0, np.float32))
-        t = np.fromiter((r.t_ns for r in samples), np.int64, len(samples))
+        if self.last is not None:
+            t = np.concatenate([[self.last.t_ns], t[:n]])
+        else:
+            t = t[:n]
         index = np.searchsorted(t, times, side="right") - 1
         age = np.where(index >= 0, (times - t[np.maximum(index, 0)]) / 1e9, -1.0).astype(np.float32)
         self.last = samples[-1]
@@ -133,7 +144,7 @@ class ThingReader:
             sizes[s.name] = max([sizes.get(s.name, 0), *(len(r.data) for r in last)])
         self._groups = (
             [
-                _Pages(reader.pages(thing, start_ns + 1, end_ns, group, size), start_ns)
+                _Pages(reader.pages(thing, start_ns + 1, end_ns, group, size, numbers=True), start_ns)
                 for group, size in page_groups({n: sizes[n] for n in names}, page)
             ]
             if names and end_ns > start_ns
@@ -150,10 +161,11 @@ class ThingReader:
                     group.pages = None
                     break
                 self.records += len(page)
-                for rec in page:
-                    for stream, samples in by_name.get(rec.name, ()):
-                        if stream.accepts(rec):
-                            samples.waiting.append(rec)
+                names = list(map(_NAME, page))
+                for name, takers in by_name.items():  # each name's records picked by C-level iterators
+                    of_name = list(compress(page, map(name.__eq__, names)))
+                    for stream, samples in takers:
+                        samples.waiting.extend(filter(stream.accepts, of_name) if stream.picky else of_name)
                 group.reached = max(group.reached, page[-1].t_ns)
 
     def hold(self, times: np.ndarray) -> list[Held]:
