@@ -19,7 +19,8 @@ a Mini frame shaped to 320 x 240 from the real frames and on a 240 x 320 DIGIT f
 background with a modelled press), as the share of one core at 25 and 60 frames/s; decoding a full-size
 (3280 x 2464) JPEG made from a real frame at 1, 1/2, 1/4 and 1/8 of its scale (``IMREAD_REDUCED_COLOR_N``),
 then shaped as gsrobotics does, beside what the presses score at each resulting resolution; and the two
-sensors played at their rates through a real hub (``gel_latency``: frame -> SSE latency, the hub's CPU).
+sensors played at their rates through a real hub (``gel_latency``: frame -> SSE latency, the hub's CPU);
+and each step of a frame's path alone, beside the decoders' floors (``gel_steps``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 from gel_latency import latency
+from gel_steps import steps
 from report import markdown_table, write_section
 from wott_driver_gel.evaluation import PressSet, load_taxim, write_recording
 from wott_driver_gel.settings import open_gel
@@ -267,6 +269,8 @@ def main() -> None:
     body += "\n" + note + "\n\n" + markdown_table(["GelSight Mini depth", "value"], depth_rows) + "\n"
     if not args.no_timing:
         body += "\n" + markdown_table(["what", "CPU per frame", "share of one core"], timing()) + "\n"
+        body += "\n" + markdown_table(["step (one frame, alone; docs/gel.md, \"What a frame costs\")",
+                                       "DIGIT 240 x 320, ms", "Mini 320 x 240, ms", "bound"], steps()) + "\n"
         body += "\n" + decode_tradeoff() + "\n\n" + through_hub() + "\n"
     print(body)
     if not args.no_write:

@@ -121,6 +121,9 @@ def test_digit_frames_from_the_device_are_turned_like_digit_interface():
     turned = rotate_digit(qvga)
     assert turned.shape == (320, 240, 3)
     assert (turned[0, 0] == qvga[0, 319]).all()  # 90° anticlockwise: the top-right corner comes top-left
+    import cv2
+
+    assert np.array_equal(turned, cv2.flip(cv2.transpose(qvga), 0))  # digit-interface's own two steps
     native = np.zeros((2464, 3280, 3), np.uint8)
     assert shape_mini(native).shape == (240, 320, 3)
 

@@ -110,10 +110,12 @@ def shape_mini(frame: np.ndarray, size: tuple[int, int] = MINI_SIZE,
 
 def rotate_digit(frame: np.ndarray) -> np.ndarray:
     """digit-interface's turn of a DIGIT frame: transposed, then flipped about the x axis (90°
-    anticlockwise)."""
+    anticlockwise), as one ``cv2.rotate``: the same pixels in one pass, without the transposed copy in
+    between (a fresh 230 kB buffer each frame: where the allocator maps it anew, its pages fault in
+    and the two steps cost 0.27-0.30 ms against 0.03-0.06; where it reuses them, 0.07 against 0.06)."""
     import cv2
 
-    return cv2.flip(cv2.transpose(frame), 0)
+    return cv2.rotate(frame, cv2.ROTATE_90_COUNTERCLOCKWISE)
 
 
 class _Device:
