@@ -31,7 +31,7 @@ import re
 from dataclasses import dataclass, field
 from itertools import repeat
 from operator import attrgetter
-from typing import TYPE_CHECKING, Any, NamedTuple, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -54,7 +54,6 @@ __all__ = [
     "ContactsSource",
     "DeformationSource",
     "DisplacementSource",
-    "EncodedImage",
     "Feature",
     "GridSource",
     "PropertySource",
@@ -350,44 +349,27 @@ class CameraSource(Source):
         except (ValueError, AttributeError):
             return False
 
-    def encoded(self, rec: Record) -> EncodedImage:
-        """A recorded image's PNG bytes (InvalidInput if the record holds none): what the export hands
-        its video process, which decodes them (``image``): the base64 decoded on the export's side,
-        the PNG on the video's, the work of each image shared between the two cores."""
-        try:
-            return EncodedImage(rec.seq, binascii.a2b_base64(load_json(rec.data)["image"]))  # b64decode's
-        except (ValueError, KeyError, TypeError) as e:
-            raise InvalidInput(self._not_png(e)) from None
-
-    def image(self, rec: Record | EncodedImage) -> np.ndarray:
+    def image(self, rec: Record) -> np.ndarray:
         """H x W x 3 uint8 of a recorded image (InvalidInput if it is not a PNG of the first one's size)."""
         import io
 
         from PIL import Image, UnidentifiedImageError
 
         h, w, _ = self.features[0].shape
-        png = rec.png if isinstance(rec, EncodedImage) else self.encoded(rec).png
         try:
+            png = binascii.a2b_base64(load_json(rec.data)["image"])  # b64decode's, without its copy
             with Image.open(io.BytesIO(png)) as img:  # an RGB image as it is: no converted copy
                 rgb = np.asarray(img if img.mode == "RGB" else img.convert("RGB"))
         except (ValueError, KeyError, TypeError, UnidentifiedImageError, OSError) as e:
-            raise InvalidInput(self._not_png(e)) from None
+            raise InvalidInput(
+                f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})"
+            ) from None
         if rgb.shape != (h, w, 3):
             raise InvalidInput(
                 f"{self.thing}: camera {self.camera!r} changed size ({rgb.shape[1]} x {rgb.shape[0]}, "
                 f"first {w} x {h}): a video keeps one size"
             )
         return rgb
-
-    def _not_png(self, e: BaseException) -> str:
-        return f"{self.thing}: a {IMAGE_EVENT} record of {self.camera!r} is not a PNG ({e!r})"
-
-
-class EncodedImage(NamedTuple):
-    """A recorded image's PNG bytes and its record's seq (``CameraSource.encoded``)."""
-
-    seq: int
-    png: bytes
 
 
 class PropertySource(Source):

@@ -9,9 +9,7 @@ has a core of its own. The child is ``python -m wott_hub.history.learning.video_
 that return something on stdout:
 
 - ``("open", (source, root, fps, settings))``: the ``CameraVideo`` it writes;
-- ``("begin", frames)`` -> the episode's ``videos/<key>/*`` columns; ``("write", held)``: no answer (the
-  block's ``Held``, its samples the PNG bytes of the images its frames show: ``CameraSource.encoded``,
-  base64 decoded by the export, ~2.5 ms an image, which balances the two processes' work);
+- ``("begin", frames)`` -> the episode's ``videos/<key>/*`` columns; ``("write", held)``: no answer;
   ``("end", None)`` -> (the columns of its end, its ``ImageStats``); ``("close", None)`` -> None.
 
 A failure of ``write`` is kept and answered at the next message that has an answer, as
@@ -30,8 +28,6 @@ import subprocess
 import sys
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
-
-import numpy as np
 
 from wott_hub.errors import WottHubError
 
@@ -99,12 +95,7 @@ class VideoProcess:
         return out
 
     def write(self, held: Held) -> None:
-        """The block's images as their PNG bytes (``CameraSource.encoded``: the base64 decoded here,
-        the PNG there), those of the samples its frames show; the others are not sent."""
-        samples: list[Any] = [None] * len(held.samples)
-        for i in np.unique(held.which[held.which >= 0]).tolist():
-            samples[i] = self.source.encoded(held.samples[i])
-        self._call("write", held._replace(samples=samples), answer=False)
+        self._call("write", held, answer=False)
 
     def end(self) -> dict[str, Any]:
         columns, self.stats = self._call("end", None)
