@@ -37,8 +37,8 @@ import numpy as np
 from .drift import drift, drift_free, upsample
 from .rest import RestReference, magnitude, smooth
 
-__all__ = ["ContactParams", "PixelContact", "components", "drift", "drift_free", "find_contacts", "threshold",
-           "upsample"]
+__all__ = ["ContactParams", "PixelContact", "components", "drift", "drift_free", "find_contacts",
+           "load_labelling", "threshold", "upsample"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,6 +83,13 @@ def percentile(a: np.ndarray, q: float) -> float:
 
 _EIGHT = np.ones((3, 3), dtype=bool)
 """8-connectivity, as ``cv2.connectedComponents``' default."""
+
+
+def load_labelling() -> None:
+    """Import what ``components`` needs (``scipy.ndimage``: 0.2-0.5 s the first time), so that a driver
+    does it before its first frame (``GelDriver``'s ``prepare``) and not at the first touch, which it
+    would hold up that long."""
+    from scipy import ndimage  # noqa: F401
 
 
 def components(mask: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:

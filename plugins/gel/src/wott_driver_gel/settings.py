@@ -248,8 +248,10 @@ def open_gel(device_id: str, family: str, settings: Mapping[str, Any], *,
     estimator = GelEstimator.of_settings(s, mm_per_px, calibration)
     estimator.markers = markers
     estimator.nodes_mm = description.mesh.nodes
+    from .contacts import load_labelling
+
     driver = GelDriver(description, estimator, open_source, source_name=name, backoff=backoff(s),
-                       max_frames=max_frames)
+                       max_frames=max_frames, prepare=load_labelling)
     driver.raw_signals = (RawSignal("camera", "image", (size[1], size[0]), rate_hz=fps,
                                     record_hz=float(s.record_raw_hz)),)
     if calibration is not None:
