@@ -25,3 +25,11 @@ def test_every_file_that_announces_the_device_simulator_is_in_the_mdns_unit(root
     files = [p for d in ("tests", "client") for p in Path(root, d).rglob("test_*.py") if p != Path(__file__)]
     users = {p.relative_to(root).as_posix() for p in files if "device_sim(" in p.read_text()}
     assert users and users <= conftest.MDNS_FILES
+
+
+def test_the_longest_first_units_exist_once(root_conftest):
+    """A renamed file would silently drop back to xdist's order (most tests first)."""
+    root, conftest = root_conftest
+    units = conftest.LONGEST_FIRST
+    assert len(units) == len(set(units))
+    assert sorted(f for f in units if f != "mdns" and not (root / f).is_file()) == []

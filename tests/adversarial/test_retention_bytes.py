@@ -1,8 +1,9 @@
 """Issue 48, item 8: ``retention_mb`` holds while raw images are recorded.
 
 A real hub (``uv run wott-hub run``) records a simulated flat-vision camera's images at 30 images/s into
-SQLite with ``retention_mb = 20``; the database file and its WAL are measured on disk every 0.2 s for
-``RUN_S``: the peak (a pass's moment) under 2x the budget, the mean of the last half under 1.35x.
+SQLite with ``retention_mb = 20``; once the database file and its WAL have reached the budget (from then
+on retention has to hold them: ~3 s of images), they are measured on disk every 0.2 s for ``RUN_S``:
+the peak (a pass's moment) under 2x the budget, the mean of the last half under 1.35x.
 Before: retention ran every 60 s whatever was written, so the pair grew with the images until the next
 pass (the issue's run: 797 MB for 30 MB). Now a pass also runs once the files have grown by a
 tenth of the budget (``retention.RetentionClock``) and the WAL is truncated after it.
@@ -18,7 +19,10 @@ from pathlib import Path
 import httpx
 
 BUDGET_MB = 20.0
-RUN_S = 40.0
+RUN_S = 20.0
+"""Measured from the moment the pair first reaches the budget, so that the whole window is the regime
+under test (before, 40 s from the first record, of which the first seconds were the files filling up):
+at ~0.7 deleting passes a second, the last half (the mean's) spans several passes."""
 
 
 def _pair_mb(folder: Path) -> float:
@@ -54,7 +58,9 @@ def test_retention_mb_holds_while_raw_images_are_recorded(tmp_path, running_hub,
         def written() -> int:
             return int(httpx.get(f"{url}/properties/health", timeout=10).json()["history"]["written"])
 
-        start = eventually(lambda: written() > 0 and written(), 60, "records written")
+        eventually(lambda: _pair_mb(tmp_path) >= BUDGET_MB, 60,
+                   lambda: f"db+WAL reaching the budget: {_pair_mb(tmp_path):.1f} MB")
+        start = written()
         peak, sizes = 0.0, []
         t0 = time.monotonic()
         while time.monotonic() - t0 < RUN_S:
