@@ -132,6 +132,8 @@ class RunningHub:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(self.proc.pid, signal.SIGKILL)
             self.proc.wait(30)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
         self._log.close()
 
 

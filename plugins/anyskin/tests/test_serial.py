@@ -84,7 +84,9 @@ def test_an_unplugged_board_is_disconnected_and_comes_back(tmp_path, until):
     path = port.open()
 
     async def main():
-        async with Run(path, until, baseline_samples=2) as run:
+        # the "lost" state lasts one back-off (then "cannot open"): 0.3 s, for the watcher polling every
+        # 5 ms on a loop that a loaded machine may not run for tens of ms
+        async with Run(path, until, baseline_samples=2, backoff_initial_s=0.3, backoff_cap_s=0.3) as run:
             await asyncio.to_thread(port.write_all, b"".join(frames(3, 10)))
             await until(lambda: len(run.frames) == 9, "the first frames")
             port.unplug()  # the pty goes: the reader's next read fails (EIO), the path vanishes
