@@ -18,11 +18,30 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from sqlalchemy import Engine
 
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, encode
 from wott_hub.history import HistoryWriter, create_engine, database_url, upgrade
 
 T0 = 1_700_000_000 * 10**9
+
+
+def new_history(db: Path) -> tuple[Engine, HistoryWriter]:
+    """A fresh history database at ``db`` (schema upgraded) and a writer on it batching every 10 ms,
+    not yet started."""
+    engine = create_engine(database_url(db))
+    upgrade(engine)
+    return engine, HistoryWriter(engine, interval_s=0.01)
+
+
+def write_all(engine: Engine, w: HistoryWriter, records: list[Record]) -> None:
+    """``records`` written by ``w`` (started, flushed, stopped), then the engine let go."""
+    w.start()
+    for r in records:
+        w.submit(r)
+    assert w.flush(60)
+    w.stop()
+    engine.dispose()
 
 
 @pytest.fixture(scope="module")
@@ -83,9 +102,7 @@ def camera_session(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("camera")
     db = d / "hub.db"
-    engine = create_engine(database_url(db))
-    upgrade(engine)
-    w = HistoryWriter(engine, interval_s=0.01)
+    engine, w = new_history(db)
     desc = example_device("flat", "cam")
     td = build_tactile_td(desc)
     td["events"]["rawImageRecorded"] = {
@@ -177,12 +194,7 @@ def camera_session(tmp_path_factory):
                 t,
                 json.dumps({"shoulder": round(0.01 * payload, 4), "elbow": round(-0.02 * payload, 4)}),
             )
-    w.start()
-    for r in records:
-        w.submit(r)
-    assert w.flush(60)
-    w.stop()
-    engine.dispose()
+    write_all(engine, w, records)
     return db, frames
 
 

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, encode
-from wott_hub.history import HistoryWriter, create_engine, database_url, upgrade
 from wott_hub.history.learning.export import DatasetRequest, export_dataset
 from wott_hub.history.learning.resample import PAGE_BYTES, page_groups
 
+from .conftest import new_history
 from .lerobot_check import check_lerobot
 
 T0 = 1_710_000_000 * 10**9
@@ -46,9 +46,7 @@ def _noise_pngs(n: int, h: int = 120, w: int = 160) -> list[str]:
 def long_camera(tmp_path_factory) -> Path:
     """``eye``: a camera ``front`` at 2 images/s and its contacts at 30 Hz, over 480 s."""
     db = tmp_path_factory.mktemp("long") / "hub.db"
-    engine = create_engine(database_url(db))
-    upgrade(engine)
-    w = HistoryWriter(engine, interval_s=0.01)
+    engine, w = new_history(db)
     td = {
         "title": "eye",
         "properties": {"contactInformation": {"type": "object"}},

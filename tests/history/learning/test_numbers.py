@@ -20,10 +20,11 @@ import pytest
 
 from wott_hub.events.fields import FieldArrays, FieldRecord
 from wott_hub.events.record import KIND_EVENT, KIND_PROPERTY, Record, SkinArrays, encode
-from wott_hub.history import HistoryWriter, create_engine, database_url, upgrade
 from wott_hub.history.learning.export import DatasetRequest, export_dataset
 from wott_hub.history.numbers import PackedRecord
 from wott_hub.history.reader import HistoryReader
+
+from .conftest import new_history, write_all
 
 T0 = 1_700_000_000 * 10**9
 FRAMES = 90
@@ -50,9 +51,7 @@ def session(tmp_path_factory) -> Path:
     from wott_hub.td.builder import build_tactile_td, static_property_values
 
     db = tmp_path_factory.mktemp("numbers") / "hub.db"
-    engine = create_engine(database_url(db))
-    upgrade(engine)
-    w = HistoryWriter(engine, interval_s=0.01)
+    engine, w = new_history(db)
     desc = example_device("flat", THING)
     seq = w.register_thing(THING, title=THING, family="test", td=json.dumps(build_tactile_td(desc)),
                            static_values=encode(static_property_values(desc)))
@@ -93,12 +92,7 @@ def session(tmp_path_factory) -> Path:
             "numOfContacts": 1, "contactLocations": [{"x": float(k), "y": 2.0, "z": 0.0}],
             "contactForces": [{"x": 0.0, "y": 0.0, "z": -float(mm.sum())}]}))
         records += [skin, field, contact]
-    w.start()
-    for r in records:
-        w.submit(r)
-    assert w.flush(60)
-    w.stop()
-    engine.dispose()
+    write_all(engine, w, records)
     return db
 
 

@@ -14,8 +14,9 @@ import pytest
 
 from wott_hub.errors import InvalidInput
 from wott_hub.events.record import KIND_EVENT, Record
-from wott_hub.history import HistoryWriter, create_engine, database_url, upgrade
 from wott_hub.history.learning.export import DatasetRequest, export_dataset
+
+from .conftest import new_history
 
 T0 = 1_710_000_000 * 10**9
 
@@ -46,9 +47,7 @@ def _children() -> list[str]:
 def resized_camera(tmp_path) -> Path:
     """``eye``: a camera whose images are 120 x 160 for 5 s, then 60 x 80."""
     db = tmp_path / "hub.db"
-    engine = create_engine(database_url(db))
-    upgrade(engine)
-    w = HistoryWriter(engine, interval_s=0.01)
+    engine, w = new_history(db)
     td = {"title": "eye", "events": {"rawImageRecorded": {"title": "rawImageRecorded", "data": {
         "type": "object", "properties": {"camera": {"type": "string", "enum": ["front"]}}}}}}
     seq = w.register_thing("eye", title="eye", family="test", td=json.dumps(td), static_values="{}")
