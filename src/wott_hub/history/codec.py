@@ -40,7 +40,7 @@ is part of the schema and may only be extended (a new first byte), never changed
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -51,7 +51,7 @@ from wott_hub.events.record import KIND_EVENT, Record, SkinArrays
 from .field_codec import PACKED_FIELD, encode_fields, field_texts, field_texts_at, join_spans
 
 __all__ = ["PACKED", "PACKED_FIELD", "SKIN_EVENT", "decode", "decode_joined", "decode_many", "encode",
-           "encode_records", "skin_numbers_at", "skin_text"]
+           "encode_records", "joined_chunks", "skin_numbers_at", "skin_text"]
 
 PACKED = 0x01
 _MARK = bytes((PACKED,))
@@ -457,20 +457,27 @@ def decode_many(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
 def decode_joined(joined: bytes, size: _Int, t_ns: _Int) -> list[str]:
     """``decode_many`` of payloads given one after the other in ``joined``, which ends with 16
     NUL bytes (``size``: their lengths): a page read as one value, no bytes object per row."""
+    out: list[str] = []
+    for rows, lo, buf, off, chunk in joined_chunks(joined, size):
+        out += _decode_at(joined, lo, buf, off, chunk, t_ns[rows], None)
+    return out
+
+
+def joined_chunks(joined: bytes, size: _Int
+                  ) -> Iterator[tuple[slice, int, npt.NDArray[np.uint8], _Int, _Int]]:
+    """The chunks of at most ``_CHUNK`` payloads of ``joined`` (``decode_joined``'s input), each as (its
+    rows, where its bytes start in ``joined``, those bytes and the 16 NULs after them, each payload's
+    offset there, their lengths): masks of a chunk's length, never a page's."""
     buf = np.frombuffer(joined, np.uint8)
     if len(buf) != int(size.sum()) + len(_PAD):
         raise ValueError("the joined payloads do not have the lengths given")
     ends = np.cumsum(size)
-    bounds = np.append(ends[_CHUNK - 1::_CHUNK], ends[-1:]).tolist()
-    out: list[str] = []
     lo = 0
-    for i in range(0, len(size), _CHUNK):  # each chunk's own bytes: masks of its length
-        hi = bounds[i // _CHUNK] + len(_PAD)
+    for i in range(0, len(size), _CHUNK):
         chunk = size[i:i + _CHUNK]
-        out += _decode_at(joined, lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk, t_ns[i:i + _CHUNK],
-                          None)
+        hi = int(ends[i + len(chunk) - 1]) + len(_PAD)
+        yield slice(i, i + len(chunk)), lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk
         lo = hi - len(_PAD)
-    return out
 
 
 def _decode_chunk(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:

@@ -31,7 +31,16 @@ import numpy.typing as npt
 from wott_hub.events.fields import SKIN_DISPLACEMENT, FieldArrays, displacement_json
 from wott_hub.events.record import KIND_EVENT, Record
 
-from .codec import _CHUNK, _PAD, PACKED, SKIN_EVENT, _decode_at, decode_many, skin_numbers_at, skin_text
+from .codec import (
+    _PAD,
+    PACKED,
+    SKIN_EVENT,
+    _decode_at,
+    decode_many,
+    joined_chunks,
+    skin_numbers_at,
+    skin_text,
+)
 from .field_codec import PACKED_FIELD, field_numbers_at
 
 __all__ = [
@@ -117,23 +126,14 @@ class Numbered(NamedTuple):
 
 def numbers_joined(joined: bytes, size: _Int, t_ns: _Int, names: Sequence[str], kinds: _Int) -> Numbered:
     """``codec.decode_joined`` of a page, the packets this module's docstring names as numbers."""
-    buf = np.frombuffer(joined, np.uint8)
-    if len(buf) != int(size.sum()) + len(_PAD):
-        raise ValueError("the joined payloads do not have the lengths given")
-    ends = np.cumsum(size)
     kinds = np.asarray(kinds)
     out = Numbered([], np.empty(0, np.int64), [])
     text_at = []
-    lo = 0
-    for i in range(0, len(size), _CHUNK):  # each chunk's own bytes, as decode_joined reads them
-        chunk = size[i:i + _CHUNK]
-        hi = int(ends[i + len(chunk) - 1]) + len(_PAD)
-        part = _chunk(joined, lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk, t_ns[i:i + _CHUNK],
-                      names[i:i + _CHUNK], kinds[i:i + _CHUNK])
+    for rows, lo, buf, off, chunk in joined_chunks(joined, size):
+        part = _chunk(joined, lo, buf, off, chunk, t_ns[rows], names[rows], kinds[rows])
         out.texts.extend(part.texts)
-        text_at.append(part.text_at + i)
-        out.found.extend((at + i, packets) for at, packets in part.found)
-        lo = hi - len(_PAD)
+        text_at.append(part.text_at + rows.start)
+        out.found.extend((at + rows.start, packets) for at, packets in part.found)
     return out._replace(text_at=np.concatenate(text_at)) if text_at else out
 
 
@@ -151,7 +151,8 @@ def numbers_many(stored: Sequence[bytes | memoryview | str], t_ns: Sequence[int]
 
 def _chunk(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
            names: Sequence[str], kinds: _Int) -> Numbered:
-    """``numbers_joined`` of at most ``codec._CHUNK`` rows at ``off`` in ``buf`` (``joined[base:]``)."""
+    """``numbers_joined`` of one of ``codec.joined_chunks``: the rows at ``off`` in ``buf``
+    (``joined[base:]``)."""
     head = np.where(size > 0, buf[off], 0)
     same = (buf[off + 1] & _SAME_TIME) != 0  # the 16 NULs after the bytes: never read beyond them
     event = kinds == KIND_EVENT
