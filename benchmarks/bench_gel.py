@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 from gel_latency import latency
-from gel_steps import steps
+from gel_steps import native_jpeg, steps
 from report import markdown_table, write_section
 from wott_driver_gel.evaluation import PressSet, load_taxim, write_recording
 from wott_driver_gel.settings import open_gel
@@ -171,14 +171,11 @@ def through_hub() -> str:
 def decode_tradeoff() -> str:
     """The Mini's native JPEG decoded at 1, 1/2, 1/4, 1/8 (libjpeg's DCT scaling), then shaped to 320 x 240:
     CPU against what the presses give at the resulting resolution (error against run time)."""
-    import cv2
     from wott_driver_gel.sources import decode_reduced, shape_mini
     from wott_driver_gel.specs import MINI_BORDER_FRACTION, MINI_DECODE_SCALE, MINI_NATIVE, MINI_SIZE
 
     ps = load_taxim("gelsight_mini")
-    full = cv2.resize(ps.presses[5], MINI_NATIVE, interpolation=cv2.INTER_CUBIC)  # made from a real frame
-    ok, jpeg = cv2.imencode(".jpg", full, [cv2.IMWRITE_JPEG_QUALITY, 90])
-    assert ok
+    jpeg = native_jpeg()
     rows = []
     for reduce in (1, 2, 4, 8):
         ts = []

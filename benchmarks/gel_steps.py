@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["steps"]
+__all__ = ["native_jpeg", "steps"]
 
 
 def _ms(fn: Callable[[], Any], n: int = 50, batches: int = 7) -> float:
@@ -37,6 +37,18 @@ def _ms(fn: Callable[[], Any], n: int = 50, batches: int = 7) -> float:
             fn()
         out.append((time.process_time() - t) / n)
     return 1e3 * float(np.median(out))
+
+
+def native_jpeg() -> np.ndarray:
+    """A Mini's native 3280 x 2464 JPEG (quality 90) made from a real frame (Taxim's press 5, enlarged)."""
+    import cv2
+    from wott_driver_gel.evaluation import load_taxim
+    from wott_driver_gel.specs import MINI_NATIVE
+
+    full = cv2.resize(load_taxim("gelsight_mini").presses[5], MINI_NATIVE, interpolation=cv2.INTER_CUBIC)
+    ok, jpeg = cv2.imencode(".jpg", full, [cv2.IMWRITE_JPEG_QUALITY, 90])
+    assert ok
+    return jpeg
 
 
 def _idat(path: Path) -> bytes:
@@ -93,9 +105,7 @@ def steps() -> list[list[str]]:
     """Rows (step, DIGIT ms, Mini ms, what bounds it)."""
     import cv2
     from bench_gel import sensor_cases
-    from wott_driver_gel.evaluation import load_taxim
     from wott_driver_gel.sources import decode_reduced, rotate_digit, shape_mini
-    from wott_driver_gel.specs import MINI_NATIVE
 
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
@@ -107,10 +117,7 @@ def steps() -> list[list[str]]:
         qvga = np.ascontiguousarray(np.rot90(cases["digit"][0], -1))  # as the DIGIT sends it
         cols["digit"]["turn_old"] = _ms(lambda: cv2.flip(cv2.transpose(qvga), 0))
         cols["digit"]["turn"] = _ms(lambda: rotate_digit(qvga))
-        ps = load_taxim("gelsight_mini")
-        full = cv2.resize(ps.presses[5], MINI_NATIVE, interpolation=cv2.INTER_CUBIC)
-        ok, jpeg = cv2.imencode(".jpg", full, [cv2.IMWRITE_JPEG_QUALITY, 90])
-        assert ok
+        jpeg = native_jpeg()
         cols["gelsight-mini"]["native"] = _ms(lambda: decode_reduced(jpeg, 8), n=5)
         reduced = decode_reduced(jpeg, 8)
         cols["gelsight-mini"]["shape"] = _ms(lambda: shape_mini(reduced))
