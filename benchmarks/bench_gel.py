@@ -275,6 +275,8 @@ def main() -> None:
     ps = load_taxim("gelsight_mini")
     mini_rows, m, radius = accuracy("GelSight Mini (taxim, 24 presses)", ps, True)
     i, j, ratio, near = radius_conflict(ps)
+    r_mm = ps.radii_px[[i, j]] * ps.mm_per_px
+    cap = BALL_R - np.sqrt(BALL_R**2 - r_mm**2)
     old_rows, _, _ = accuracy("older GelSight (taxim, 48, held out)", load_taxim("gelsight"), False)
     body = markdown_table(header, mini_rows + old_rows)
     body += ("\n\nWithin each series of the Mini set (the same site pressed deeper and deeper), the spread "
@@ -286,7 +288,9 @@ def main() -> None:
              f"change the image alike (summed colour change {100 * near:.1f} % apart; the driver's radii "
              f"{radius[i]:.1f} and {radius[j]:.1f} px) but are labelled {ps.radii_px[i]:.0f} and "
              f"{ps.radii_px[j]:.0f} px, a ratio of {ratio:.2f}: no radius read from the images can lie "
-             "within 15 % of both (that needs a ratio under 1.15 / 0.85 = 1.35).\n")
+             "within 15 % of both (that needs a ratio under 1.15 / 0.85 = 1.35). The ball's cap those labels "
+             f"imply, {cap[0]:.3f} and {cap[1]:.3f} mm (a ratio of {cap[0] / cap[1]:.2f}), cannot both be "
+             "met within 20 % either (that needs under 1.2 / 0.8 = 1.5).\n")
     depth_rows, note = depth(ps)
     body += "\n" + note + "\n\n" + markdown_table(["GelSight Mini depth", "value"], depth_rows) + "\n"
     if not args.no_timing:
