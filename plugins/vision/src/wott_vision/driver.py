@@ -173,13 +173,13 @@ class _SourceEnded(Exception):
     """A finite simulated source played to its end: the device is done, not lost (``frames()`` ends)."""
 
 
-def _recorded_base(driver: CameraDriver, start_ns: int, reader: Any) -> int:
-    """The hub time of a recording's t_s = 0: when its first read began (``start_ns``, monotonic: the
-    reader paces from there), after the last frame of a previous read. Not when it was opened: the hub's
-    loop may be busy between the two (the frames of the device opened first were stamped ~100 ms early)."""
+def _recorded_base(read_ns: int, last_t_ns: int, reader: Any) -> int:
+    """The hub time of a recording's t_s = 0: when its first read began (``read_ns``, hub time: the
+    reader paces from there), after the last frame of a previous read (``last_t_ns``). Not when it was
+    opened: the hub's loop may be busy between the two (the frames of the device opened first were
+    stamped ~100 ms early)."""
     t_s_ns = int(round(float(getattr(reader, "t_s", 0.0) or 0.0) * 1e9))
-    read_ns = driver._wall0_ns + start_ns - driver._mono0_ns
-    return max(read_ns, driver._last_t_ns + 1_000_000) - t_s_ns
+    return max(read_ns, last_t_ns + 1_000_000) - t_s_ns
 
 
 class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavailableNodes, ServesRawSignals):
@@ -317,9 +317,9 @@ class CameraDriver(Driver, Tareable, Recalibratable, NoisyAtRest, ReportsUnavail
             reader = self._reader
             if reader is None:
                 raise _SourceLost(f"{self.source_name} is closed")
-            start_ns, (ok, images) = time.monotonic_ns(), reader.read()
+            read_ns, (ok, images) = self._wall0_ns - self._mono0_ns + time.monotonic_ns(), reader.read()
             if ok and self._base_ns is None and getattr(reader, "recorded", False):
-                self._base_ns = _recorded_base(self, start_ns, reader)
+                self._base_ns = _recorded_base(read_ns, self._last_t_ns, reader)
             t_ns = self._timestamp(reader)
             truth = getattr(reader, "truth", None)
             truth_t_s = getattr(reader, "t_s", None) if truth is not None else None
