@@ -19,8 +19,9 @@ export waits only if the block before is not sent yet, that is while the child i
 the one before that (sent from the export's thread, a block was taken only once the child had
 finished the one before it: each side waited for the other's slower blocks). Flow control is the
 pipe's: memory stays a block being made and one being sent on the export's side, one on the
-child's. The child ignores SIGINT (a terminal's Ctrl-C reaches the whole process group: the export
-stops it) and ends when its stdin closes, so it never outlives the export.
+child's. The child runs in a process group of its own (a terminal's Ctrl-C reaches its foreground group:
+the export, which stops the child; the child interrupted while it started printed a traceback), ignores
+SIGINT all the same, and ends when its stdin closes, so it never outlives the export.
 """
 
 from __future__ import annotations
@@ -77,16 +78,17 @@ class VideoProcess:
         self.settings = settings
         self.stats: ImageStats | None = None
         self._proc: subprocess.Popen[bytes] | None = subprocess.Popen(
-            [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+            [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            process_group=0)  # a group of its own: a terminal's Ctrl-C is the export's alone
         self._sender = ThreadPoolExecutor(1, thread_name_prefix=f"video-{self.key}")
         self._sending: Future[None] | None = None  # the message being sent (at most one)
         self._call("open", (source, root, fps, settings), answer=False)
 
     def _sent(self) -> None:
         """Wait for the message being sent (its OSError if the pipe broke)."""
-        sending, self._sending = self._sending, None
-        if sending is not None:
-            sending.result()
+        if self._sending is not None:  # kept until sent: a Ctrl-C here leaves it for ``close``
+            self._sending.result()
+            self._sending = None
 
     def _call(self, kind: str, body: Any, *, answer: bool = True) -> Any:
         """Send a message; its answer if it has one. One without an answer is sent by the sending
