@@ -159,6 +159,7 @@ class CameraVideo:
         self.file: _File | None = None
         self._image: tuple[int, Any, np.ndarray] | None = None  # (seq of the record, yuv frame, rgb)
         self._black: Any = None
+        self._yuv: Any = None  # the rgb24 -> yuv420p converter (``_to_yuv``)
         self.stats: ImageStats | None = None
         self._episode_start = 0
         self._frame = 0
@@ -196,21 +197,29 @@ class CameraVideo:
         self._flush()
         return {f"videos/{self.key}/to_timestamp": self.file.frames / self.fps}
 
-    def _frame_of(self, rec: Any) -> tuple[Any, np.ndarray]:
+    def _to_yuv(self, rgb: np.ndarray) -> Any:
+        """An image as a ``yuv420p`` frame, by swscale as ``VideoFrame.reformat`` converts it (the same
+        bytes), through one converter kept for the camera and in this thread: ``reformat`` makes a
+        new swscale context an image, with a pool of threads (its default, ``threads=0``), which cost
+        ~0.6 ms of setup and, beside the export's other process on a 2-core machine, waits for its
+        threads (2.2 ms an image, 1.1 ms so; docs/learning.md, section 6)."""
         import av
+        from av.video.reformatter import VideoReformatter
 
+        if self._yuv is None:
+            self._yuv = VideoReformatter()
+        frame = av.VideoFrame.from_ndarray(rgb, format="rgb24")
+        return self._yuv.reformat(frame, format="yuv420p", threads=1)
+
+    def _frame_of(self, rec: Any) -> tuple[Any, np.ndarray]:
         if rec is None:
             if self._black is None:
                 rgb = np.zeros((self.height, self.width, 3), np.uint8)
-                self._black = (
-                    av.VideoFrame.from_ndarray(rgb, format="rgb24").reformat(format="yuv420p"),
-                    rgb,
-                )
+                self._black = (self._to_yuv(rgb), rgb)
             return self._black  # type: ignore[no-any-return]
         if self._image is None or self._image[0] != rec.seq:
             rgb = self.source.image(rec)
-            yuv = av.VideoFrame.from_ndarray(rgb, format="rgb24").reformat(format="yuv420p")
-            self._image = (rec.seq, yuv, rgb)
+            self._image = (rec.seq, self._to_yuv(rgb), rgb)
         return self._image[1], self._image[2]
 
     def write(self, held: Held) -> None:

@@ -13,10 +13,15 @@ that return something on stdout:
   ``("end", None)`` -> (the columns of its end, its ``ImageStats``); ``("close", None)`` -> None.
 
 A failure of ``write`` is kept and answered at the next message that has an answer, as
-``("error", exception)``: the export raises it there, as it did from the video thread. Flow control is
-the pipe's: the export blocks on a ``write`` while the child is a block behind, so memory stays one block
-on each side. The child ignores SIGINT (a terminal's Ctrl-C reaches the whole process group: the export
-stops it) and ends when its stdin closes, so it never outlives the export.
+``("error", exception)``: the export raises it there, as it did from the video thread. A ``write`` is
+sent by a thread of the export (``_sending``) while the export goes on with its next block: the
+export waits only if the block before is not sent yet, that is while the child is still working on
+the one before that (sent from the export's thread, a block was taken only once the child had
+finished the one before it: each side waited for the other's slower blocks). Flow control is the
+pipe's: memory stays a block being made and one being sent on the export's side, one on the
+child's. The child runs in a process group of its own (a terminal's Ctrl-C reaches its foreground group:
+the export, which stops the child; the child interrupted while it started printed a traceback), ignores
+SIGINT all the same, and ends when its stdin closes, so it never outlives the export.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import signal
 import struct
 import subprocess
 import sys
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
@@ -72,16 +78,29 @@ class VideoProcess:
         self.settings = settings
         self.stats: ImageStats | None = None
         self._proc: subprocess.Popen[bytes] | None = subprocess.Popen(
-            [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+            [sys.executable, "-m", __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            process_group=0)  # a group of its own: a terminal's Ctrl-C is the export's alone
+        self._sender = ThreadPoolExecutor(1, thread_name_prefix=f"video-{self.key}")
+        self._sending: Future[None] | None = None  # the message being sent (at most one)
         self._call("open", (source, root, fps, settings), answer=False)
 
+    def _sent(self) -> None:
+        """Wait for the message being sent (its OSError if the pipe broke)."""
+        if self._sending is not None:  # kept until sent: a Ctrl-C here leaves it for ``close``
+            self._sending.result()
+            self._sending = None
+
     def _call(self, kind: str, body: Any, *, answer: bool = True) -> Any:
+        """Send a message; its answer if it has one. One without an answer is sent by the sending
+        thread (module doc): this returns once the message before it is sent."""
         proc = self._proc
         assert proc is not None and proc.stdin is not None and proc.stdout is not None
         try:
-            _send(proc.stdin, (kind, body))
+            self._sent()
             if not answer:
+                self._sending = self._sender.submit(_send, proc.stdin, (kind, body))
                 return None
+            _send(proc.stdin, (kind, body))
             status, value = _receive(proc.stdout)
         except (OSError, EOFError, pickle.UnpicklingError):
             raise VideoProcessEnded(f"the video process of {self.key} ended (exit code {proc.poll()})"
@@ -115,6 +134,11 @@ class VideoProcess:
         finally:
             self._proc = None
             assert proc.stdin is not None and proc.stdout is not None
+            try:  # a message still being sent (Ctrl-C while sending): the child reads it, or is gone
+                self._sent()
+            except OSError:
+                pass
+            self._sender.shutdown()
             try:
                 proc.stdin.close()
             except OSError:  # a broken pipe's unflushed bytes
