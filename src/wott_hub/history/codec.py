@@ -48,10 +48,10 @@ import numpy.typing as npt
 
 from wott_hub.events.record import KIND_EVENT, Record, SkinArrays
 
-from .field_codec import PACKED_FIELD, encode_fields, field_texts, field_texts_at, join_spans
+from .field_codec import PACKED_FIELD, PAD, encode_fields, field_texts, field_texts_at, join_spans
 
-__all__ = ["PACKED", "PACKED_FIELD", "SKIN_EVENT", "decode", "decode_joined", "decode_many", "encode",
-           "encode_records", "joined_chunks", "skin_numbers_at", "skin_text"]
+__all__ = ["PACKED", "PACKED_FIELD", "PAD", "SKIN_EVENT", "decode", "decode_at", "decode_joined",
+           "decode_many", "encode", "encode_records", "joined_chunks", "skin_numbers_at", "skin_text"]
 
 PACKED = 0x01
 _MARK = bytes((PACKED,))
@@ -268,16 +268,12 @@ def _pack(p: _Packets, t_ns: _Int) -> list[bytes]:
 def _unpack(blobs: Sequence[bytes | memoryview], t_ns: list[int]) -> _Packets:
     """The numbers of packed payloads (ValueError for bytes that are not a whole packet)."""
     size = np.fromiter(map(len, blobs), np.int64, len(blobs))
-    buf = np.frombuffer(b"".join([*blobs, _PAD]), np.uint8)
+    buf = np.frombuffer(b"".join([*blobs, PAD]), np.uint8)
     return _unpack_at(buf, np.cumsum(size) - size, size, np.array(t_ns, np.int64))
 
 
-_PAD = bytes(16)
-"""After a batch's bytes, so that reading a header never goes past the end."""
-
-
 def _unpack_at(buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int) -> _Packets:
-    """The numbers of the packets at ``off`` in ``buf`` (which ends with ``_PAD``)."""
+    """The numbers of the packets at ``off`` in ``buf`` (which ends with ``PAD``)."""
     flags = buf[off + 1]
     first = buf[off + 2].astype(np.int64)
     wide = first >= 0x80
@@ -459,7 +455,7 @@ def decode_joined(joined: bytes, size: _Int, t_ns: _Int) -> list[str]:
     NUL bytes (``size``: their lengths): a page read as one value, no bytes object per row."""
     out: list[str] = []
     for rows, lo, buf, off, chunk in joined_chunks(joined, size):
-        out += _decode_at(joined, lo, buf, off, chunk, t_ns[rows], None)
+        out += decode_at(joined, lo, buf, off, chunk, t_ns[rows], None)
     return out
 
 
@@ -469,21 +465,21 @@ def joined_chunks(joined: bytes, size: _Int
     rows, where its bytes start in ``joined``, those bytes and the 16 NULs after them, each payload's
     offset there, their lengths): masks of a chunk's length, never a page's."""
     buf = np.frombuffer(joined, np.uint8)
-    if len(buf) != int(size.sum()) + len(_PAD):
+    if len(buf) != int(size.sum()) + len(PAD):
         raise ValueError("the joined payloads do not have the lengths given")
     ends = np.cumsum(size)
     lo = 0
     for i in range(0, len(size), _CHUNK):
         chunk = size[i:i + _CHUNK]
-        hi = int(ends[i + len(chunk) - 1]) + len(_PAD)
+        hi = int(ends[i + len(chunk) - 1]) + len(PAD)
         yield slice(i, i + len(chunk)), lo, buf[lo:hi], ends[i:i + _CHUNK] - chunk - lo, chunk
-        lo = hi - len(_PAD)
+        lo = hi - len(PAD)
 
 
 def _decode_chunk(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
-    """``decode_many`` of at most ``_CHUNK`` rows: their bytes joined once, then ``_decode_at``."""
+    """``decode_many`` of at most ``_CHUNK`` rows: their bytes joined once, then ``decode_at``."""
     try:
-        joined = b"".join([*stored, _PAD])  # type: ignore[list-item]  # a str raises TypeError
+        joined = b"".join([*stored, PAD])  # type: ignore[list-item]  # a str raises TypeError
     except TypeError:  # a str among them: a row written before 0006 on a database that kept its text
         return _decode_each(stored, t_ns)
     size = np.fromiter(map(len, stored), np.int64, len(stored))
@@ -491,11 +487,11 @@ def _decode_chunk(stored: Sequence[Stored], t_ns: Sequence[int]) -> list[str]:
         times = np.fromiter(t_ns, np.int64, len(stored))
     except OverflowError:
         times = np.fromiter(map(_time, t_ns), np.int64, len(stored))
-    return _decode_at(joined, 0, np.frombuffer(joined, np.uint8), np.cumsum(size) - size, size, times,
+    return decode_at(joined, 0, np.frombuffer(joined, np.uint8), np.cumsum(size) - size, size, times,
                       stored)  # type: ignore[arg-type]  # no str: the join took them all
 
 
-def _decode_at(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
+def decode_at(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
                stored: Sequence[bytes | memoryview] | None) -> list[str]:
     """The texts of the payloads at ``off`` in ``buf``, which is ``joined[base:]`` (``stored``: the
     same payloads as objects, else sliced from ``joined``): the packets found and unpacked in
@@ -524,8 +520,8 @@ def _decode_at(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, 
 
 def _with_fields(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size: _Int, t_ns: _Int,
                  stored: Sequence[bytes | memoryview] | None, fields: npt.NDArray[np.bool_]) -> list[str]:
-    """``_decode_at`` of payloads some of which are packed displacement packets (``field_codec``): those
-    written back by ``field_texts``, the others as ``_decode_at`` writes them."""
+    """``decode_at`` of payloads some of which are packed displacement packets (``field_codec``): those
+    written back by ``field_texts``, the others as ``decode_at`` writes them."""
     where = np.flatnonzero(fields)
     others = np.flatnonzero(~fields)
     texts = field_texts_at(buf, off[where], size[where], t_ns[where])
@@ -535,7 +531,7 @@ def _with_fields(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int
     out[where] = texts
     if len(others):
         rest = None if stored is None else [stored[i] for i in others.tolist()]
-        out[others] = _decode_at(joined, base, buf, off[others], size[others], t_ns[others], rest)
+        out[others] = decode_at(joined, base, buf, off[others], size[others], t_ns[others], rest)
     result: list[str] = out.tolist()
     return result
 

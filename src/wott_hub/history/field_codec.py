@@ -42,7 +42,8 @@ from wott_hub.events.fields import (
 )
 from wott_hub.events.record import KIND_EVENT, Record
 
-__all__ = ["PACKED_FIELD", "encode_fields", "field_numbers_at", "field_texts", "field_texts_at", "join_spans"]
+__all__ = ["PACKED_FIELD", "PAD", "encode_fields", "field_numbers_at", "field_texts", "field_texts_at",
+           "join_spans"]
 
 PACKED_FIELD = 0x02
 _SAME_TIME, _IDS16, _VALUES16 = 1, 2, 4
@@ -145,14 +146,14 @@ def _tables() -> tuple[npt.NDArray[np.void], npt.NDArray[np.void]]:
     return np.frombuffer(ids, "V4"), np.frombuffer(tails, "V6")
 
 
-_PAD = bytes(16)
+PAD = bytes(16)
 """After a batch's bytes, so that reading a header never goes past the end."""
 
 
 def _le(buf: npt.NDArray[np.uint8], at: npt.NDArray[np.int64], width: npt.NDArray[np.int64],
         signed: bool) -> npt.NDArray[np.int64]:
     """The little-endian integers of ``width`` (2 or 4) bytes at ``at`` in ``buf`` (which ends with
-    ``_PAD``: reading 4 bytes never runs past it)."""
+    ``PAD``: reading 4 bytes never runs past it)."""
     value = buf[at].astype(np.int64) | buf[at + 1].astype(np.int64) << 8
     wide = width == 4
     value[wide] |= buf[at[wide] + 2].astype(np.int64) << 16 | buf[at[wide] + 3].astype(np.int64) << 24
@@ -182,7 +183,7 @@ def join_spans(buf: npt.NDArray[np.uint8], at: npt.NDArray[np.int64],
 def _unpack(buf: npt.NDArray[np.uint8], off: npt.NDArray[np.int64], size: npt.NDArray[np.int64],
             t_ns: npt.NDArray[np.int64]) -> tuple[list[int], FieldArrays, npt.NDArray[np.int64]]:
     """(timeStamps, the numbers of every packet one after the other, nodes per packet) of the packed
-    packets at ``off`` in ``buf`` (which ends with ``_PAD``), their headers read together
+    packets at ``off`` in ``buf`` (which ends with ``PAD``), their headers read together
     (ValueError: bytes that are not whole packets)."""
     if (size < _HEAD.size).any():
         raise ValueError("a stored displacement packet is damaged: shorter than its header")
@@ -225,7 +226,7 @@ def field_texts(stored: Sequence[bytes | memoryview], t_ns: Sequence[int]) -> li
     """Each packed packet's text exactly as ``displacement_json`` wrote it (``t_ns``: the records'
     times, which a packet whose timeStamp equals it does not store again)."""
     size = np.fromiter(map(len, stored), np.int64, len(stored))
-    buf = np.frombuffer(b"".join([*stored, _PAD]), np.uint8)
+    buf = np.frombuffer(b"".join([*stored, PAD]), np.uint8)
     return field_texts_at(buf, np.cumsum(size) - size, size, np.array(t_ns, np.int64))
 
 

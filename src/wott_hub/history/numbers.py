@@ -32,10 +32,10 @@ from wott_hub.events.fields import SKIN_DISPLACEMENT, FieldArrays, displacement_
 from wott_hub.events.record import KIND_EVENT, Record
 
 from .codec import (
-    _PAD,
     PACKED,
+    PAD,
     SKIN_EVENT,
-    _decode_at,
+    decode_at,
     decode_many,
     joined_chunks,
     skin_numbers_at,
@@ -141,7 +141,7 @@ def numbers_many(stored: Sequence[bytes | memoryview | str], t_ns: Sequence[int]
                  kinds: Sequence[int]) -> Numbered:
     """``numbers_joined`` of rows as the driver gives them (``codec.decode_many``'s input)."""
     try:
-        joined = b"".join([*stored, _PAD])  # type: ignore[list-item]  # a str raises TypeError
+        joined = b"".join([*stored, PAD])  # type: ignore[list-item]  # a str raises TypeError
         times = np.fromiter(t_ns, np.int64, len(stored))
     except (TypeError, OverflowError):  # a text row (before 0006), a time beyond int64: as text
         return Numbered(decode_many(stored, t_ns), np.arange(len(stored)), [])
@@ -161,11 +161,11 @@ def _chunk(joined: bytes, base: int, buf: npt.NDArray[np.uint8], off: _Int, size
     field = (head == PACKED_FIELD) & same & event & (named == SKIN_DISPLACEMENT)
     text = ~(skin | field)
     if text.all():
-        return Numbered(_decode_at(joined, base, buf, off, size, t_ns, None), np.arange(len(off)), [])
+        return Numbered(decode_at(joined, base, buf, off, size, t_ns, None), np.arange(len(off)), [])
     out = Numbered([], np.flatnonzero(text), [])
     if len(out.text_at):
         at = out.text_at
-        out.texts.extend(_decode_at(joined, base, buf, off[at], size[at], t_ns[at], None))
+        out.texts.extend(decode_at(joined, base, buf, off[at], size[at], t_ns[at], None))
     if skin.any():
         at = np.flatnonzero(skin)
         n, ids, micro = skin_numbers_at(buf, off[at], size[at], t_ns[at])
