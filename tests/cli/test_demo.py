@@ -123,12 +123,14 @@ def _recorded(database: str) -> set[str]:
     """The devices with a record in ``database`` so far, read in this process: waiting by polling
     the command would start a Python process (~0.8 s of CPU) every poll; the tests assert on what the
     command prints once the wait is over."""
+    from sqlalchemy.exc import OperationalError
+
     from wott_hub.cli._db import open_reader
     from wott_hub.errors import HistoryError
 
     try:
         reader = open_reader(database, integrity=False)
-    except HistoryError:  # no first batch yet: no database, or no tables in it
+    except (HistoryError, OperationalError):  # not made yet: no file, no tables, the file locked
         return set()
     try:
         return {t.id for t in reader.things(count=False) if t.first_seq is not None}
@@ -166,15 +168,19 @@ def test_history_audit_says_why_it_is_empty_and_lists_a_write(cli, demo, eventua
     assert res.returncode == 0, res.stderr
 
     def audited() -> bool:  # read in this process (see _recorded); the command is asserted on below
+        from sqlalchemy.exc import OperationalError
+
         from wott_hub.history import create_engine, database_url
         from wott_hub.security import read_audit
 
         engine = create_engine(database_url(demo.database))
         try:
             entries = read_audit(engine, limit=1000, since_ns=int(float(since) * 1e9))
-            return any((e.action, e.target) == ("POST", "/wot/hub/actions/restartDevice") for e in entries)
+        except OperationalError:  # the file locked by a write: again at the next poll
+            return False
         finally:
             engine.dispose()
+        return any((e.action, e.target) == ("POST", "/wot/hub/actions/restartDevice") for e in entries)
 
     eventually(audited, timeout=60, what="the restart in the audit trail")
     out = cli("history", "audit", "--database", demo.database, "--from", since).stdout
