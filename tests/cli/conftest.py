@@ -2,8 +2,9 @@
 
 ``cli(*args)`` (tests/conftest.py) runs the installed ``wott-hub`` with ``COLUMNS=80`` (what a pipe
 or a CI log gets) and returns the finished process. ``demo`` is a real ``wott-hub run`` with no
-config (the demo fleet, free ports, its database in a temporary folder), started once for the package and
-stopped with SIGINT; it yields what its banner printed, parsed: the URLs are read from the
+config (the demo fleet, free ports, its database in a temporary folder), started once for the module that
+uses it and stopped with SIGINT at its end (a session-scoped one kept the fleet simulating, ~0.4 of a
+core, until its worker's last test); it yields what its banner printed, parsed: the URLs are read from the
 banner, so a banner that cuts or loses one fails every test that needs it.
 """
 
@@ -54,9 +55,9 @@ def _parse(folder: Path, lines: list[str]) -> Demo:
     return demo
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def demo(tmp_path_factory):
-    """A real demo hub (``wott-hub run``, free ports) for the session, its banner parsed."""
+    """A real demo hub (``wott-hub run``, free ports) for the module, its banner parsed."""
     folder = tmp_path_factory.mktemp("demo")
     env = {**os.environ, "COLUMNS": "80"}
     log = (folder / "hub.log").open("w")  # a pipe nobody reads could fill and block the hub's logging

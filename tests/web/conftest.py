@@ -7,6 +7,7 @@ twin nobody tested in a browser is not tested.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import tempfile
@@ -76,10 +77,19 @@ def twin(tmp_path_factory, hub_runner):
     hub.stop()
 
 
+# The demo devices' frame rates in ``fleet``: what its pages show (the list, a camera's live image) needs
+# a few frames a second; at the demo's own (cameras 30 fps, taxels 100 Hz) the fleet took ~0.5-0.7
+# of a core while the browser waited for it.
+FLEET_RATES = {"barrel-vision": {"fps": 5.0}, "flat-vision": {"fps": 5.0}, "taxel-array": {"rate_hz": 10.0}}
+
+
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory, hub_runner):
-    """The demo fleet (each installed plugin's simulated devices) and the scene barrel."""
-    hub = hub_runner(tmp_path_factory.mktemp("fleet") / "hub.db", [*demo_devices(), barrel_scene("barrel")])
+    """The demo fleet (each installed plugin's simulated devices, at the rates of ``FLEET_RATES``) and
+    the scene barrel."""
+    demo = [dataclasses.replace(d, settings={**d.settings, **FLEET_RATES.get(d.family, {})})
+            for d in demo_devices()]
+    hub = hub_runner(tmp_path_factory.mktemp("fleet") / "hub.db", [*demo, barrel_scene("barrel")])
     yield hub
     hub.stop()
 
