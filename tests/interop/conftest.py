@@ -1,8 +1,11 @@
 """The demo hub, really started, and the foreign WoT clients the interoperability tests drive.
 
-One hub for the package: the demo fleet (each installed plugin's simulated
+One hub per test module: the demo fleet (each installed plugin's simulated
 devices), history on, its TD directory, no mDNS (other hubs on this machine
-must not join the fleet under test). The clients are the ones users have:
+must not join the fleet under test). Not one for the package: tests/interop has
+no ``__init__.py``, so pytest makes no Package node for it and a fixture of scope
+"package" lived until the session ended (in the full suite the demo fleet went on
+recording behind every later file of that worker). The clients are the ones users have:
 node-wot 0.9.2 (npm, pinned by package-lock.json), wotpy 0.18 (the project's
 own dependency) and Debian's chromium; the TD validators are the Thingweb
 playground's npm packages (pinned there too) and pyld. A missing client fails the suite, it
@@ -31,16 +34,31 @@ CHROMIUM = "/usr/bin/chromium"
 NODE_PACKAGES: dict[str, str] = json.loads((HERE / "package.json").read_text())["dependencies"]
 
 
-@pytest.fixture(scope="package")
+SLOWER: dict[str, dict[str, float]] = {"flat-vision": {"fps": 10.0}, "barrel-vision": {"fps": 10.0},
+                                        "taxel-array": {"rate_hz": 30.0}}
+"""The demo fleet's frame rates here, by family: its Things, events and forms are the demo's, fewer
+frames a second (the cameras at 30/s and the taxel array at 100/s kept ~0.85 of the 2 cores busy for
+as long as the hub ran, ~0.4 at these rates). No test here counts frames or depends on their rate."""
+
+
+def _demo_fleet() -> tuple:
+    from wott_hub.plugins import DeviceConfig
+    from wott_hub.plugins.demo import demo_devices
+
+    return tuple(DeviceConfig(d.id, d.family, {**d.settings, **SLOWER.get(d.family, {})})
+                 for d in demo_devices())
+
+
+@pytest.fixture(scope="module")
 def demo_hub(tmp_path_factory, hub_thread):
-    """A started HubThread (tests/conftest.py) serving the demo fleet on 127.0.0.1, free ports."""
+    """A started HubThread (tests/conftest.py) serving the demo fleet on 127.0.0.1, free ports, at the
+    frame rates of ``SLOWER``."""
     from wott_hub.config import HubConfig
     from wott_hub.network import DiscoveryConfig
-    from wott_hub.plugins.demo import demo_devices
 
     db = tmp_path_factory.mktemp("interop") / "hub.db"
     cfg = HubConfig.demo_config(http_port=0, ws_port=0, database=str(db), history_batch_ms=20,
-                                devices=tuple(demo_devices()), discovery=DiscoveryConfig.off())
+                                devices=_demo_fleet(), discovery=DiscoveryConfig.off())
     hub = hub_thread(cfg).start()
     yield hub
     hub.stop()
@@ -90,7 +108,7 @@ def _tare_every_device(url: str) -> None:
             assert r.status_code == 200, (thing_id, r.text)
 
 
-@pytest.fixture(scope="package")
+@pytest.fixture(scope="module")
 def scripted_press(demo_hub):
     """scripted_press(device_id): a device joins, presses once, ends and leaves (``_late_press``),
     and every device is tared (``_tare_every_device``)."""
@@ -102,7 +120,7 @@ def scripted_press(demo_hub):
     return press
 
 
-@pytest.fixture(scope="package")
+@pytest.fixture(scope="module")
 def tare_every_device(demo_hub):
     """tare_every_device(): every device tared now (``_tare_every_device``), and recorded: returns once
     the hub's history has nothing queued, so that a replay started next holds the ``deviceAction``."""
@@ -201,7 +219,7 @@ def _tail(err: str) -> str:
     return "\n".join(x for x in err.splitlines() if "unknown format" not in x)[-3000:]
 
 
-@pytest.fixture(scope="package")
+@pytest.fixture(scope="module")
 def node_script(node_wot):
     """node_script(name, *args) -> a running NodeScript (tests/interop/<name>), killed at the end."""
     started: list[NodeScript] = []
