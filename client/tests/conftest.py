@@ -38,7 +38,7 @@ def wait_for():
     return HELPERS._wait_for
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def hub():
     """A started HubThread: devices ``pad`` (flat) and ``cyl`` (cylinder), pressing in a loop."""
     from wott_hub.config import HubConfig
