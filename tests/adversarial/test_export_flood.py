@@ -157,6 +157,8 @@ def test_eight_exports_at_once_two_run_the_device_streams_on_and_memory_stays_bo
         gap = reader.longest_gap(since=t0)
         peak = _memory(pid)["VmHWM"]
         reader.stop()
+        print(f"eight exports: {took:.1f} s, the device's longest SSE gap {gap:.2f} s, RSS {base >> 20} -> "
+              f"{peak >> 20} MB")
         assert gap < 2.0, f"the device's SSE stream stopped for {gap:.1f} s during the exports ({took:.0f} s)"
         assert peak - base < 300 << 20, f"RSS {base >> 20} MB -> peak {peak >> 20} MB during the exports"
     finally:
