@@ -31,16 +31,7 @@ def _png(h: int, w: int) -> str:
 
 def _children() -> list[str]:
     """The command lines of this process's children that are video processes."""
-    out = []
-    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
-        for pid in (task / "children").read_text().split():
-            try:
-                cmd = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
-            except FileNotFoundError:
-                continue
-            if "video_process" in cmd:
-                out.append(cmd)
-    return out
+    return [cmd for cmd in map(_cmdline, _children_of(os.getpid())) if "video_process" in cmd]
 
 
 @pytest.fixture
