@@ -182,6 +182,23 @@ def press_scene():
     return _press_scene
 
 
+def _demo_fleet(rates: dict[str, dict[str, float]]) -> list:
+    """The demo fleet (each installed plugin's simulated devices), each family's settings overridden by
+    ``rates`` (fewer frames a second where a test counts none: the demo's own rates keep a core busy)."""
+    import dataclasses
+
+    from wott_hub.plugins.demo import demo_devices
+
+    return [dataclasses.replace(d, settings={**d.settings, **rates.get(d.family, {})})
+            for d in demo_devices()]
+
+
+@pytest.fixture(scope="session")
+def demo_fleet():
+    """demo_fleet(rates) -> the demo's DeviceConfigs at those rates (``_demo_fleet``)."""
+    return _demo_fleet
+
+
 # --- the wott-hub command as a person runs it (tests/cli, tests/adversarial) ---------------------
 
 WOTT_HUB = str(Path(sys.executable).with_name("wott-hub"))

@@ -41,16 +41,8 @@ frames a second (the cameras at 30/s and the taxel array at 100/s kept ~0.85 of 
 as long as the hub ran, ~0.4 at these rates). No test here counts frames or depends on their rate."""
 
 
-def _demo_fleet() -> tuple:
-    from wott_hub.plugins import DeviceConfig
-    from wott_hub.plugins.demo import demo_devices
-
-    return tuple(DeviceConfig(d.id, d.family, {**d.settings, **SLOWER.get(d.family, {})})
-                 for d in demo_devices())
-
-
 @pytest.fixture(scope="module")
-def demo_hub(tmp_path_factory, hub_thread):
+def demo_hub(tmp_path_factory, hub_thread, demo_fleet):
     """A started HubThread (tests/conftest.py) serving the demo fleet on 127.0.0.1, free ports, at the
     frame rates of ``SLOWER``."""
     from wott_hub.config import HubConfig
@@ -58,7 +50,7 @@ def demo_hub(tmp_path_factory, hub_thread):
 
     db = tmp_path_factory.mktemp("interop") / "hub.db"
     cfg = HubConfig.demo_config(http_port=0, ws_port=0, database=str(db), history_batch_ms=20,
-                                devices=_demo_fleet(), discovery=DiscoveryConfig.off())
+                                devices=tuple(demo_fleet(SLOWER)), discovery=DiscoveryConfig.off())
     hub = hub_thread(cfg).start()
     yield hub
     hub.stop()

@@ -7,7 +7,6 @@ twin nobody tested in a browser is not tested.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import shutil
 import tempfile
@@ -18,7 +17,6 @@ import pytest
 
 from wott_hub.config import HubConfig
 from wott_hub.network import DirectoryConfig
-from wott_hub.plugins.demo import demo_devices
 
 CHROMIUM = os.environ.get("WOTT_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -84,12 +82,11 @@ FLEET_RATES = {"barrel-vision": {"fps": 5.0}, "flat-vision": {"fps": 5.0}, "taxe
 
 
 @pytest.fixture(scope="module")
-def fleet(tmp_path_factory, hub_runner):
+def fleet(tmp_path_factory, hub_runner, demo_fleet):
     """The demo fleet (each installed plugin's simulated devices, at the rates of ``FLEET_RATES``) and
     the scene barrel."""
-    demo = [dataclasses.replace(d, settings={**d.settings, **FLEET_RATES.get(d.family, {})})
-            for d in demo_devices()]
-    hub = hub_runner(tmp_path_factory.mktemp("fleet") / "hub.db", [*demo, barrel_scene("barrel")])
+    devices = [*demo_fleet(FLEET_RATES), barrel_scene("barrel")]
+    hub = hub_runner(tmp_path_factory.mktemp("fleet") / "hub.db", devices)
     yield hub
     hub.stop()
 
