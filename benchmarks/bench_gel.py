@@ -94,13 +94,22 @@ def accuracy(name: str, ps: PressSet, series: bool) -> tuple[list[list[str]], di
     return rows, m, radius
 
 
-def radius_conflict(ps: PressSet, close: float = 0.02) -> tuple[int, int, float, float]:
+def image_change(ps: PressSet) -> np.ndarray:
+    """Each press frame's summed colour change from the background (no model: the raw signal)."""
+    return np.array([np.abs(p.astype(np.float32) - ps.background).sum() for p in ps.presses])
+
+
+def ball_cap(r_mm: np.ndarray) -> np.ndarray:
+    """The depth of the ball's cap under a contact circle of radius ``r_mm``: R - sqrt(R² - r²)."""
+    return BALL_R - np.sqrt(BALL_R**2 - r_mm**2)
+
+
+def radius_conflict(ps: PressSet, change: np.ndarray, close: float = 0.02) -> tuple[int, int, float, float]:
     """The two presses of one series (one ball, one site) whose images change by nearly the same amount
     (summed colour change within ``close`` of each other) and whose labelled radii differ the most: (i, j,
     the labels' ratio, the changes' relative difference). Two presses that change the image alike are
     pressed alike; an estimator of the image gives them the same radius, which cannot lie within 15 % of
-    both labels once their ratio passes 1.15 / 0.85 = 1.35."""
-    change = np.array([np.abs(p.astype(np.float32) - ps.background).sum() for p in ps.presses])
+    both labels once their ratio passes 1.15 / 0.85 = 1.35. ``change``: ``image_change(ps)``."""
     best = (0, 0, 1.0, 0.0)
     for a, b in SERIES:
         for i in range(a, b):
@@ -112,8 +121,9 @@ def radius_conflict(ps: PressSet, close: float = 0.02) -> tuple[int, int, float,
     return best
 
 
-def depth(ps: PressSet) -> tuple[list[list[str]], str]:
-    """Leave-half-out: calibrated on the even presses, measured on the odd, and the other way round."""
+def depth(ps: PressSet, change: np.ndarray) -> tuple[list[list[str]], str]:
+    """Leave-half-out: calibrated on the even presses, measured on the odd, and the other way round
+    (``change``: ``image_change(ps)``, beside the depth's order)."""
     from scipy.stats import spearmanr
     from wott_driver_gel.depth import calibrate
     from wott_driver_gel.evaluation import dent_depth
@@ -128,9 +138,7 @@ def depth(ps: PressSet) -> tuple[list[list[str]], str]:
         for i in test:
             d = cal.depth(smooth(ps.presses[i], cal.sigma_px), ref, 8.0)
             centre[i], dent[i] = dent_depth(d, ps.centres_px[i], ps.radii_px[i], cal.scale)
-    change = np.array([np.abs(p.astype(np.float32) - ps.background).sum() for p in ps.presses])
-    r = ps.radii_px * ps.mm_per_px
-    ball = BALL_R - np.sqrt(BALL_R**2 - r**2)  # the cap the labels' contact circle implies
+    ball = ball_cap(ps.radii_px * ps.mm_per_px)  # the cap the labels' contact circle implies
     err = dent / ball - 1
     rows = [["dent below the contact edge / ball geometry (median)", f"{np.median(dent / ball):.2f}"],
             ["presses with the dent within 20 % of the ball's", f"{int(np.sum(np.abs(err) <= 0.2))}/{n}"],
@@ -274,9 +282,9 @@ def main() -> None:
               "radius / label (median)", "radius within 15 %"]
     ps = load_taxim("gelsight_mini")
     mini_rows, m, radius = accuracy("GelSight Mini (taxim, 24 presses)", ps, True)
-    i, j, ratio, near = radius_conflict(ps)
-    r_mm = ps.radii_px[[i, j]] * ps.mm_per_px
-    cap = BALL_R - np.sqrt(BALL_R**2 - r_mm**2)
+    change = image_change(ps)
+    i, j, ratio, near = radius_conflict(ps, change)
+    cap = ball_cap(ps.radii_px[[i, j]] * ps.mm_per_px)
     old_rows, _, _ = accuracy("older GelSight (taxim, 48, held out)", load_taxim("gelsight"), False)
     body = markdown_table(header, mini_rows + old_rows)
     body += ("\n\nWithin each series of the Mini set (the same site pressed deeper and deeper), the spread "
@@ -291,7 +299,7 @@ def main() -> None:
              "within 15 % of both (that needs a ratio under 1.15 / 0.85 = 1.35). The ball's cap those labels "
              f"imply, {cap[0]:.3f} and {cap[1]:.3f} mm (a ratio of {cap[0] / cap[1]:.2f}), cannot both be "
              "met within 20 % either (that needs under 1.2 / 0.8 = 1.5).\n")
-    depth_rows, note = depth(ps)
+    depth_rows, note = depth(ps, change)
     body += "\n" + note + "\n\n" + markdown_table(["GelSight Mini depth", "value"], depth_rows) + "\n"
     if not args.no_timing:
         body += "\n" + markdown_table(["what", "CPU per frame", "share of one core"], timing()) + "\n"
